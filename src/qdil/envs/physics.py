@@ -1,0 +1,316 @@
+"""Many MuJoCo simulations of one model, stepped in one call on all cores.
+
+The hot path of every qdil run is physics. :class:`MujocoBatch` keeps one ``MjData`` per
+simulation and advances all of them in a single numba kernel that calls MuJoCo's C API
+directly (``mj_step``, ``mj_rnePostConstraint``, ...) with the GIL released and the
+simulations spread over ``num_threads`` threads. No Python runs per simulation.
+
+Why not ``mujoco.rollout`` or ``mujoco.batch``: ``rollout`` zeroes the solver warm start on
+every call, so its trajectories drift away from ``mj_step``'s (gymnasium's); ``batch`` keeps
+the warm start but cannot run ``mj_rnePostConstraint`` after a step, which gymnasium's
+Humanoid and Ant observations need (``cfrc_ext``). The kernel here does exactly what
+gymnasium's ``MujocoEnv.do_simulation`` does, so trajectories are bit-identical.
+
+After each step the kernel also evaluates foot contacts *at the new state*: it runs
+``mj_kinematics`` + ``mj_collision`` + ``mj_sensorPos`` so that MuJoCo ``contact`` sensors
+(added to the model by the caller) report whether each foot touches the floor in that
+configuration. Those calls only overwrite derived quantities that the next ``mj_step``
+recomputes from the state, so the dynamics are unchanged; everything the task reads from the
+post-step data (positions, ``cinert``, ``cfrc_ext``, ...) is copied out *before* them.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import os
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import mujoco
+import numba
+import numpy as np
+from numba import njit, prange
+
+
+def _libmujoco() -> ctypes.CDLL:
+    """The MuJoCo shared library that the ``mujoco`` Python package already loaded."""
+    folder = Path(mujoco.__file__).parent
+    for pattern in ("libmujoco.so*", "libmujoco*.dylib", "mujoco.dll"):
+        found = sorted(folder.glob(pattern))
+        if found:
+            return ctypes.CDLL(str(found[0]))
+    raise ImportError(
+        f"could not find the MuJoCo shared library in {folder}; reinstall the `mujoco` package"
+    )
+
+
+_LIB = _libmujoco()
+# Pointers cross the ctypes boundary as 64-bit integers: numba passes int64 through to C
+# unchanged, and on every 64-bit ABI a pointer argument travels in the same register.
+_PTR = ctypes.c_int64
+
+
+def _c_function(name: str, *argtypes: type) -> ctypes._CFuncPtr:
+    function = getattr(_LIB, name)
+    function.argtypes = list(argtypes)
+    function.restype = None
+    return function
+
+
+_mj_step = _c_function("mj_step", _PTR, _PTR)
+_mj_forward = _c_function("mj_forward", _PTR, _PTR)
+_mj_reset_data = _c_function("mj_resetData", _PTR, _PTR)
+_mj_rne_post_constraint = _c_function("mj_rnePostConstraint", _PTR, _PTR)
+_mj_kinematics = _c_function("mj_kinematics", _PTR, _PTR)
+_mj_collision = _c_function("mj_collision", _PTR, _PTR)
+_mj_sensor_pos = _c_function("mj_sensorPos", _PTR, _PTR)
+_mju_copy = _c_function("mju_copy", _PTR, _PTR, ctypes.c_int)
+
+
+@njit(nogil=True)
+def _copy_out(i, sources, lengths, offsets, out):  # pragma: no cover - numba
+    base = out.ctypes.data + i * out.shape[1] * 8
+    for f in range(sources.shape[0]):
+        _mju_copy(base + offsets[f] * 8, sources[f, i], lengths[f])
+
+
+@njit(nogil=True, parallel=True)
+def _step_kernel(
+    model,
+    datas,
+    ctrl_ptrs,
+    ctrl,
+    active,
+    nstep,
+    rne,
+    sources,
+    lengths,
+    offsets,
+    out,
+    sensor_ptrs,
+    sensors,
+):  # pragma: no cover - numba
+    nu = ctrl.shape[1]
+    nsensor = sensors.shape[1]
+    for i in prange(datas.shape[0]):
+        if not active[i]:
+            continue
+        data = datas[i]
+        _mju_copy(ctrl_ptrs[i], ctrl.ctypes.data + i * nu * 8, nu)
+        for _ in range(nstep):
+            _mj_step(model, data)
+        if rne:
+            _mj_rne_post_constraint(model, data)
+        _copy_out(i, sources, lengths, offsets, out)
+        if nsensor > 0:
+            _mj_kinematics(model, data)
+            _mj_collision(model, data)
+            _mj_sensor_pos(model, data)
+            _mju_copy(sensors.ctypes.data + i * nsensor * 8, sensor_ptrs[i], nsensor)
+
+
+@njit(nogil=True, parallel=True)
+def _reset_kernel(
+    model,
+    datas,
+    ids,
+    qpos_ptrs,
+    qvel_ptrs,
+    qpos,
+    qvel,
+    sources,
+    lengths,
+    offsets,
+    out,
+    sensor_ptrs,
+    sensors,
+):  # pragma: no cover - numba
+    nq = qpos.shape[1]
+    nv = qvel.shape[1]
+    nsensor = sensors.shape[1]
+    for j in prange(ids.shape[0]):
+        i = ids[j]
+        data = datas[i]
+        # Exactly gymnasium's MujocoEnv.reset + set_state: reset, write the state, forward.
+        _mj_reset_data(model, data)
+        _mju_copy(qpos_ptrs[i], qpos.ctypes.data + j * nq * 8, nq)
+        _mju_copy(qvel_ptrs[i], qvel.ctypes.data + j * nv * 8, nv)
+        _mj_forward(model, data)
+        _copy_out(i, sources, lengths, offsets, out)
+        if nsensor > 0:
+            _mju_copy(sensors.ctypes.data + i * nsensor * 8, sensor_ptrs[i], nsensor)
+
+
+@dataclass(frozen=True)
+class Export:
+    """A slice of a flat ``MjData`` field copied out after every step and reset.
+
+    Attributes:
+        field: ``MjData`` attribute name, e.g. ``"qpos"`` or ``"cfrc_ext"``.
+        start: first element of the flattened field.
+        stop: one past the last element; ``None`` for the end of the field.
+    """
+
+    field: str
+    start: int = 0
+    stop: int | None = None
+
+
+def default_num_threads() -> int:
+    """Threads for physics: every core this process may run on."""
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:  # macOS and Windows have no affinity API
+        cores = os.cpu_count() or 1
+    return max(1, min(cores, numba.config.NUMBA_NUM_THREADS))
+
+
+class MujocoBatch:
+    """``num_sims`` simulations of one model, advanced together on ``num_threads`` threads.
+
+    Args:
+        model: the compiled model; shared read-only by all simulations.
+        num_sims: number of simulations N.
+        exports: ``MjData`` slices to copy into :attr:`exported` after every step and reset,
+            keyed by a name of the caller's choosing.
+        rne_post_constraint: run ``mj_rnePostConstraint`` after each step, as gymnasium does
+            (needed for ``cfrc_ext``).
+        num_threads: physics threads; ``None`` for every available core.
+
+    Attributes:
+        exported: (N, E) float64 array; :meth:`view` returns the slice of one export.
+        sensordata: (N, nsensordata) float64 array of sensor values at the current states.
+
+    Raises:
+        ValueError: if ``num_sims`` or ``num_threads`` is out of range or an export names an
+            unknown field.
+    """
+
+    def __init__(
+        self,
+        model: mujoco.MjModel,
+        num_sims: int,
+        exports: dict[str, Export],
+        *,
+        rne_post_constraint: bool = False,
+        num_threads: int | None = None,
+    ) -> None:
+        if num_sims < 1:
+            raise ValueError(f"num_envs must be at least 1, got {num_sims}")
+        max_threads = numba.config.NUMBA_NUM_THREADS
+        if num_threads is not None and not 1 <= num_threads <= max_threads:
+            raise ValueError(
+                f"num_threads must be between 1 and {max_threads} (NUMBA_NUM_THREADS), "
+                f"got {num_threads}"
+            )
+        self.model = model
+        self.num_sims = num_sims
+        self.num_threads = num_threads or default_num_threads()
+        self.rne_post_constraint = rne_post_constraint
+        self.datas = [mujoco.MjData(model) for _ in range(num_sims)]
+        self._model_ptr = model._address
+        self._data_ptrs = np.array([d._address for d in self.datas], dtype=np.int64)
+        self._ctrl_ptrs = self._pointers("ctrl")
+        self._qpos_ptrs = self._pointers("qpos")
+        self._qvel_ptrs = self._pointers("qvel")
+        self._sensor_ptrs = self._pointers("sensordata")
+
+        self._slices: dict[str, tuple[slice, tuple[int, ...]]] = {}
+        sources, lengths, offsets = [], [], []
+        width = 0
+        probe = self.datas[0]
+        for name, export in exports.items():
+            if not hasattr(probe, export.field):
+                raise ValueError(f"export {name!r}: MjData has no field {export.field!r}")
+            flat = np.asarray(getattr(probe, export.field)).reshape(-1)
+            stop = flat.size if export.stop is None else export.stop
+            if not 0 <= export.start < stop <= flat.size:
+                raise ValueError(
+                    f"export {name!r}: [{export.start}:{stop}] is outside "
+                    f"{export.field} of size {flat.size}"
+                )
+            length = stop - export.start
+            sources.append(self._pointers(export.field) + 8 * export.start)
+            lengths.append(length)
+            offsets.append(width)
+            self._slices[name] = (slice(width, width + length), (length,))
+            width += length
+        self._sources = np.array(sources, dtype=np.int64).reshape(len(sources), num_sims)
+        self._lengths = np.array(lengths, dtype=np.int32)
+        self._offsets = np.array(offsets, dtype=np.int32)
+        self.exported = np.zeros((num_sims, width))
+        self.sensordata = np.zeros((num_sims, model.nsensordata))
+        self._all = np.ones(num_sims, dtype=np.bool_)
+
+    def _pointers(self, field: str) -> np.ndarray:
+        return np.array([getattr(d, field).ctypes.data for d in self.datas], dtype=np.int64)
+
+    def view(self, name: str) -> np.ndarray:
+        """The (N, length) columns of :attr:`exported` that hold export ``name``."""
+        columns, _ = self._slices[name]
+        return self.exported[:, columns]
+
+    def step(self, ctrl: np.ndarray, nstep: int, active: np.ndarray | None = None) -> None:
+        """Set controls and advance the active simulations by ``nstep`` substeps.
+
+        Args:
+            ctrl: (N, nu) float64 C-contiguous controls.
+            nstep: number of ``mj_step`` calls (the task's frame skip).
+            active: (N,) bool mask of simulations to step; ``None`` for all.
+        """
+        numba.set_num_threads(self.num_threads)
+        _step_kernel(
+            self._model_ptr, self._data_ptrs, self._ctrl_ptrs, ctrl,
+            self._all if active is None else active, nstep, self.rne_post_constraint,
+            self._sources, self._lengths, self._offsets, self.exported,
+            self._sensor_ptrs, self.sensordata,
+        )  # fmt: skip
+
+    def reset(self, ids: np.ndarray, qpos: np.ndarray, qvel: np.ndarray) -> None:
+        """Reset simulations ``ids`` to the given states, as gymnasium's ``set_state``.
+
+        Args:
+            ids: (n,) int64 indices of the simulations to reset.
+            qpos: (n, nq) float64 positions.
+            qvel: (n, nv) float64 velocities.
+        """
+        numba.set_num_threads(self.num_threads)
+        _reset_kernel(
+            self._model_ptr, self._data_ptrs, np.ascontiguousarray(ids, dtype=np.int64),
+            self._qpos_ptrs, self._qvel_ptrs, np.ascontiguousarray(qpos, dtype=np.float64),
+            np.ascontiguousarray(qvel, dtype=np.float64),
+            self._sources, self._lengths, self._offsets, self.exported,
+            self._sensor_ptrs, self.sensordata,
+        )  # fmt: skip
+
+
+def add_contact_sensors(spec: mujoco.MjSpec, geoms: Sequence[str], floor: str) -> None:
+    """Add one ``contact`` sensor per foot geom, reporting whether it touches ``floor``.
+
+    The sensor's ``found`` value counts the contacts between the two geoms in MuJoCo's
+    contact list (``data.contact``, within the geoms' margin). It is a position-stage sensor,
+    so it only needs kinematics and collision detection.
+
+    Args:
+        spec: the model spec to edit in place.
+        geoms: foot geom names, in measure order.
+        floor: the floor geom name.
+
+    Raises:
+        ValueError: if a geom does not exist in the model.
+    """
+    names = {g.name for g in spec.geoms}
+    for name in (*geoms, floor):
+        if name not in names:
+            raise ValueError(f"geom {name!r} not in the model; geoms are {sorted(names)}")
+    for name in geoms:
+        sensor = spec.add_sensor()
+        sensor.name = f"qdil_contact_{name}"
+        sensor.type = mujoco.mjtSensor.mjSENS_CONTACT
+        sensor.objtype = mujoco.mjtObj.mjOBJ_GEOM
+        sensor.objname = name
+        sensor.reftype = mujoco.mjtObj.mjOBJ_GEOM
+        sensor.refname = floor
+        sensor.intprm[0] = 1  # data="found"
+        sensor.intprm[2] = 1  # num: one slot suffices for a found flag

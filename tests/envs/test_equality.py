@@ -1,0 +1,112 @@
+"""qdil's batched tasks equal gymnasium's v5 tasks step for step (decision D9)."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.vector import AutoresetMode
+
+import qdil  # noqa: F401
+from qdil.envs import TASKS
+
+ALL_TASKS = list(TASKS)
+
+
+def assert_close(actual: np.ndarray, expected: np.ndarray, what: str) -> None:
+    """1e-6 relative, or absolute near zero."""
+    scale = np.maximum(1.0, np.abs(expected))
+    error = np.max(np.abs(actual - expected) / scale) if actual.size else 0.0
+    assert error <= 1e-6, f"{what}: max relative error {error:.3g}"
+
+
+def lockstep(task: str, mode: AutoresetMode, steps: int, num_envs: int = 3, **kwargs) -> int:
+    """Steps qdil's and gymnasium's vector envs with the same actions; returns episode ends."""
+    ours = gym.make_vec(f"qdil/{task}", num_envs=num_envs, autoreset_mode=mode, **kwargs)
+    reference = gym.make_vec(
+        task, num_envs=num_envs, vectorization_mode="sync",
+        vector_kwargs={"autoreset_mode": mode}, **kwargs,
+    )  # fmt: skip
+    obs, _ = ours.reset(seed=7)
+    ref_obs, _ = reference.reset(seed=7)
+    assert_close(obs, ref_obs, "reset observation")
+    rng = np.random.default_rng(0)
+    low, high = ours.single_action_space.low, ours.single_action_space.high
+    ends = 0
+    for t in range(steps):
+        # 20 % beyond the bounds: MuJoCo clamps controls, the control cost does not
+        actions = rng.uniform(1.2 * low, 1.2 * high, size=(num_envs, low.size)).astype(np.float32)
+        obs, reward, terminated, truncated, info = ours.step(actions)
+        ref_obs, ref_reward, ref_terminated, ref_truncated, ref_info = reference.step(actions)
+        np.testing.assert_array_equal(terminated, ref_terminated, err_msg=f"terminated, step {t}")
+        np.testing.assert_array_equal(truncated, ref_truncated, err_msg=f"truncated, step {t}")
+        assert_close(obs, ref_obs, f"observation, step {t}")
+        assert_close(reward, ref_reward, f"reward, step {t}")
+        done = terminated | truncated
+        if mode is AutoresetMode.SAME_STEP and done.any():
+            for i in np.flatnonzero(done):
+                assert_close(info["final_obs"][i], ref_info["final_obs"][i], f"final obs {t}")
+        ends += int(done.sum())
+    ours.close()
+    reference.close()
+    return ends
+
+
+@pytest.mark.parametrize("mode", [AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP])
+@pytest.mark.parametrize("task", ALL_TASKS)
+def test_equal_to_gymnasium_over_1000_steps(task: str, mode: AutoresetMode) -> None:
+    # 1010 steps: HalfCheetah never terminates, so its 1000-step truncation must be reached
+    ends = lockstep(task, mode, steps=1010)
+    assert ends >= 3, "the comparison must cross episode ends"
+
+
+@pytest.mark.parametrize("task", ["Walker2d-v5", "HalfCheetah-v5"])
+def test_equal_to_gymnasium_with_short_horizon_and_kwargs(task: str) -> None:
+    kwargs = {"max_episode_steps": 25, "ctrl_cost_weight": 0.5, "reset_noise_scale": 0.05}
+    ends = lockstep(task, AutoresetMode.NEXT_STEP, steps=120, **kwargs)
+    assert ends >= 12
+
+
+def test_disabled_autoreset_with_reset_mask_equals_gymnasium() -> None:
+    mode = AutoresetMode.DISABLED
+    ours = gym.make_vec("qdil/Hopper-v5", num_envs=4, autoreset_mode=mode)
+    reference = gym.make_vec(
+        "Hopper-v5", num_envs=4, vectorization_mode="sync", vector_kwargs={"autoreset_mode": mode}
+    )
+    ours.reset(seed=1)
+    reference.reset(seed=1)
+    rng = np.random.default_rng(2)
+    ends = 0
+    for _ in range(300):
+        actions = rng.uniform(-1, 1, size=(4, 3)).astype(np.float32)
+        obs, reward, terminated, truncated, _ = ours.step(actions)
+        ref_obs, ref_reward, *_ = reference.step(actions)
+        assert_close(obs, ref_obs, "observation")
+        assert_close(reward, ref_reward, "reward")
+        done = terminated | truncated
+        if done.any():
+            ends += int(done.sum())
+            obs, _ = ours.reset(options={"reset_mask": done})
+            ref_obs, _ = reference.reset(options={"reset_mask": done})
+            assert_close(obs, ref_obs, "observation after masked reset")
+    assert ends >= 5
+
+
+def test_reset_distribution_equals_gymnasium_for_many_seeds() -> None:
+    ours = gym.make_vec("qdil/HalfCheetah-v5", num_envs=16)
+    reference = gym.make_vec("HalfCheetah-v5", num_envs=16, vectorization_mode="sync")
+    for seed in (0, 1, 99, 2**31):
+        assert_close(ours.reset(seed=seed)[0], reference.reset(seed=seed)[0], f"seed {seed}")
+    # seed=None keeps each generator's stream, as gymnasium does
+    assert_close(ours.reset()[0], reference.reset()[0], "continued stream")
+
+
+def test_physics_thread_count_does_not_change_results() -> None:
+    results = []
+    for threads in (1, 2):
+        env = gym.make_vec("qdil/Walker2d-v5", num_envs=8, num_threads=threads)
+        env.reset(seed=3)
+        rng = np.random.default_rng(4)
+        trace = [env.step(rng.uniform(-1, 1, (8, 6)))[0] for _ in range(60)]
+        results.append(np.stack(trace))
+    np.testing.assert_array_equal(results[0], results[1])
