@@ -198,7 +198,7 @@ class LocomotionVectorEnv(VectorEnv):
         return self._obs.copy(), {"foot_contact": self._contacts(), "_foot_contact": mask.copy()}
 
     def step(
-        self, actions: np.ndarray
+        self, actions: np.ndarray, mask: np.ndarray | None = None
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         """Advance every sub-environment by one env step.
 
@@ -206,6 +206,10 @@ class LocomotionVectorEnv(VectorEnv):
             actions: (N, action_dim) float actions. Like gymnasium, values outside the
                 action space are passed on: MuJoCo clamps the controls to ``ctrlrange``
                 while the control cost is computed on the action as given.
+            mask: (N,) bool, the sub-environments to advance (a qdil extension, only with
+                ``autoreset_mode=DISABLED``); the others keep their state and report reward
+                0 and no episode end. Evaluations use it to stop simulating finished
+                episodes.
 
         Returns:
             ``(obs, reward, terminated, truncated, info)`` with (N, ...) arrays; rewards are
@@ -218,12 +222,23 @@ class LocomotionVectorEnv(VectorEnv):
             raise RuntimeError("call reset() before step()")
         actions = self._check_actions(actions)
         resetting = self._needs_reset.copy()
-        if self.autoreset_mode is AutoresetMode.DISABLED and resetting.any():
-            raise RuntimeError(
-                f"sub-environments {np.flatnonzero(resetting)[:10].tolist()} finished; "
-                "reset them with reset(options={'reset_mask': mask}) (autoreset is DISABLED)"
-            )
         stepping = ~resetting
+        if mask is not None:
+            if self.autoreset_mode is not AutoresetMode.DISABLED:
+                raise ValueError("step(mask=...) needs autoreset_mode=DISABLED")
+            mask = np.asarray(mask, dtype=bool)
+            if mask.shape != (self.num_envs,):
+                raise ValueError(f"mask must have shape ({self.num_envs},), got {mask.shape}")
+            resetting &= mask
+            stepping = mask & ~resetting
+        if self.autoreset_mode is AutoresetMode.DISABLED:
+            if resetting.any():
+                raise RuntimeError(
+                    f"sub-environments {np.flatnonzero(resetting)[:10].tolist()} finished; "
+                    "reset them with reset(options={'reset_mask': mask}) or leave them out "
+                    "of step(mask=...) (autoreset is DISABLED)"
+                )
+            resetting = np.zeros_like(resetting)
         self._ctrl[:] = actions
         self.physics.step(self._ctrl, self.task.frame_skip, stepping)
         x = self._arrays()
@@ -241,11 +256,11 @@ class LocomotionVectorEnv(VectorEnv):
         obs = self.task.observation(x)
 
         info: dict[str, Any] = {}
-        any_resetting = resetting.any()
-        if any_resetting:  # sub-environments that reset in this step did not move
+        partial = not stepping.all()
+        if partial:  # sub-environments that reset or sit out this step did not move
             reward = np.where(stepping, reward, 0.0)
         for key, value in {**terms, **self.task.info(x, velocity)}.items():
-            if any_resetting:
+            if partial:
                 value = np.where(stepping if value.ndim == 1 else stepping[:, None], value, 0.0)
             info[key] = value
             info[f"_{key}"] = stepping
@@ -262,7 +277,7 @@ class LocomotionVectorEnv(VectorEnv):
             }  # fmt: skip
             info["_episode"] = done
 
-        if any_resetting:  # NEXT_STEP: these sub-environments reset now
+        if resetting.any():  # NEXT_STEP: these sub-environments reset now
             self._reset_envs(np.flatnonzero(resetting))
             obs[resetting] = self.task.observation(self._arrays())[resetting]
             contacts[resetting] = self._contacts()[resetting]
@@ -277,8 +292,10 @@ class LocomotionVectorEnv(VectorEnv):
             self._reset_envs(np.flatnonzero(done))
             obs[done] = self.task.observation(self._arrays())[done]
             contacts[done] = self._contacts()[done]
-        elif self.autoreset_mode is not AutoresetMode.SAME_STEP:
+        elif self.autoreset_mode is AutoresetMode.NEXT_STEP:
             self._needs_reset = done
+        elif self.autoreset_mode is AutoresetMode.DISABLED:
+            self._needs_reset |= done
         info["foot_contact"] = contacts
         info["_foot_contact"] = self._all
         self._obs = obs

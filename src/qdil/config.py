@@ -1,0 +1,134 @@
+"""Recipe sections: typed, documented once, validated by jsonargparse.
+
+A recipe is one YAML file with the sections ``seed``, ``name``, ``env``, ``rl``, ``reward``,
+``bonus``, ``demos``, ``qd`` and ``logging``. Classes are chosen with jsonargparse's
+``class_path``/``init_args`` (LightningCLI's dialect): ``rl`` (the gradient estimator),
+``reward`` (a reward model, or its registered name), ``qd.emitter`` and ``qd.scheduler``.
+Every default lives in a signature here or in the chosen class, so it is documented once.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+import numpy as np
+from ribs.archives import ArchiveBase
+from ribs.emitters import EmitterBase
+from ribs.schedulers import Scheduler
+
+from qdil.rewards.base import RewardModel
+
+RewardFactory = Callable[[int, int, int], RewardModel]
+"""A reward model class with its hyperparameters; qdil passes obs_dim, action_dim, k."""
+
+EmitterFactory = Callable[[ArchiveBase, np.ndarray], EmitterBase]
+"""An emitter class with its hyperparameters; qdil passes the CMA-MAE archive and θ_0."""
+
+SchedulerFactory = Callable[[ArchiveBase, list[EmitterBase]], Scheduler]
+"""A pyribs scheduler class with its options; qdil passes the archive and emitters."""
+
+
+@dataclass
+class EnvConfig:
+    """The task and its simulations.
+
+    Attributes:
+        task: gymnasium task id: Walker2d-v5, HalfCheetah-v5, Humanoid-v5, Hopper-v5, Ant-v5.
+        num_envs: simulations of the VPPO phases (the paper: 3000); divisible by k+1.
+        eval_envs: simulations of the evaluations; ``null`` for λ·branch_episodes (or
+            mean_episodes if larger).
+        num_threads: physics threads; ``null`` for every available core.
+        max_episode_steps: episode horizon (the paper: 1000).
+        task_kwargs: gymnasium keyword arguments of the task (e.g. ``ctrl_cost_weight``).
+    """
+
+    task: str = "Walker2d-v5"
+    num_envs: int = 3000
+    eval_envs: int | None = None
+    num_threads: int | None = None
+    max_episode_steps: int = 1000
+    task_kwargs: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass
+class QDConfig:
+    """The quality-diversity side: archives, emitter, scheduler, evaluation.
+
+    Attributes:
+        iterations: QD iterations (the paper: 2000).
+        cells: grid cells per measure (the paper: 50, i.e. 50×50 for two feet).
+        archive_learning_rate: CMA-MAE archive learning rate α.
+        threshold_min: CMA-MAE minimum threshold.
+        branch_episodes: episodes scoring each branched solution (PPGA: 10).
+        mean_episodes: episodes scoring the search policy θ_μ (PPGA: all 3000 envs).
+        deterministic_eval: score with mean actions (PPGA samples: False).
+        fitness: ``reward``: the archive's objective is the return under the reward model
+            (decision D1; imitation). ``true``: the true return (an oracle, as the public
+            QD-IL code does; not imitation).
+        emitter: emitter class and hyperparameters (default: ``qdil.qd.PPGAEmitter``).
+        scheduler: pyribs scheduler class and options (default: ``ribs.schedulers.Scheduler``).
+    """
+
+    iterations: int = 2000
+    cells: int = 50
+    archive_learning_rate: float = 0.5
+    threshold_min: float = 200.0
+    branch_episodes: int = 10
+    mean_episodes: int = 100
+    deterministic_eval: bool = False
+    fitness: Literal["reward", "true"] = "reward"
+    emitter: EmitterFactory | None = None
+    scheduler: SchedulerFactory | None = None
+
+
+@dataclass
+class DemoConfig:
+    """Demonstrations for the reward model.
+
+    Attributes:
+        path: a qdil demonstration file (``.npz``); ``null`` when the reward needs none.
+        num_episodes: use the first n episodes (``null``: all).
+    """
+
+    path: str | None = None
+    num_episodes: int | None = None
+
+
+@dataclass
+class BonusConfig:
+    """The single-step archive exploration bonus (decision D5).
+
+    Attributes:
+        enabled: add r_exp = 1 / (1 + p(δ(s))) to the reward model's rewards.
+        weight: multiplier of r_exp (the paper: 1).
+        cells: cells per measure of the single-step archive; ``null`` uses the 2^k binary
+            contact patterns (the measures are 0/1 flags).
+    """
+
+    enabled: bool = False
+    weight: float = 1.0
+    cells: int | None = None
+
+
+@dataclass
+class LoggingConfig:
+    """Where a run writes and what it logs.
+
+    Attributes:
+        root: parent folder of run directories.
+        checkpoint_every: save a checkpoint every K iterations (and at the end).
+        progress: show a progress bar.
+        wandb: ``offline`` (default; no network, sync later with ``wandb sync``),
+            ``online``, or ``disabled``.
+        wandb_project: W&B project.
+        heatmap_every: log an archive heatmap every K iterations (0: never).
+    """
+
+    root: str = "runs"
+    checkpoint_every: int = 10
+    progress: bool = True
+    wandb: Literal["offline", "online", "disabled"] = "offline"
+    wandb_project: str = "qdil"
+    heatmap_every: int = 25

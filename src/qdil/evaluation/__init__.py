@@ -1,0 +1,1 @@
+"""Evaluation: re-scoring archives, paper-style tables, statistics and figures."""

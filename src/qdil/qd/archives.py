@@ -1,0 +1,124 @@
+"""The archives of a QD-IL run and their metrics (decisions D1 and D10).
+
+A run keeps three pyribs ``GridArchive``s over the k foot-contact measures in [0, 1]^k:
+
+- ``main``: the CMA-MAE archive (``learning_rate``, ``threshold_min``) inside the pyribs
+  ``Scheduler``. Its objective is the *learned* return (learned reward + bonus), so
+  thresholds, xNES ranking and restarts never see the true reward.
+- ``true``: a passive MAP-Elites archive of the same solutions keyed on their **true**
+  return. Every reported metric comes from it; ``qdil eval`` and ``qdil demos`` read it.
+- ``learned``: a passive archive of the learned returns, for the learned-reward metrics.
+  It stores no policies (solution_dim 1), only objectives.
+
+Extra fields carried by every elite: its observation statistics (``obs_mean``,
+``obs_var``, ``obs_count``) and its mean episode length (``length``, for the offset
+QD-Score).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from ribs.archives import ArchiveBase, GridArchive
+
+QD_OFFSETS: dict[str, float] = {
+    "Walker2d-v5": 1.413,
+    "HalfCheetah-v5": 9.231,
+    "Humanoid-v5": 0.0,
+    "Hopper-v5": 0.9,
+    "Ant-v5": 3.24,
+}
+"""Per-step reward offsets of the offset QD-Score: QDax's values that PPGA reports with.
+
+PPGA's offset QD-Score adds ``offset × episode length`` to every elite's return so that
+negative returns count as small positive contributions. QDax tuned these for Brax's
+rewards; for gymnasium's v5 rewards they are kept for comparability with PPGA's tables
+(see docs/concepts/metrics.md for how far gymnasium's worst per-step rewards fall below
+them).
+"""
+
+
+def elite_fields(obs_dim: int) -> dict[str, tuple[tuple[int, ...], type]]:
+    """Pyribs ``extra_fields`` of policy archives: observation statistics and length."""
+    return {
+        "obs_mean": ((obs_dim,), np.float64),
+        "obs_var": ((obs_dim,), np.float64),
+        "obs_count": ((), np.float64),
+        "length": ((), np.float64),
+    }
+
+
+def make_grid(
+    *,
+    solution_dim: int,
+    cells: Sequence[int],
+    extra_fields: dict,
+    learning_rate: float | None = None,
+    threshold_min: float = -np.inf,
+    seed: int | None = None,
+) -> GridArchive:
+    """A GridArchive over [0, 1]^k with float32 policies (they are tens of thousands long)."""
+    kwargs = {}
+    if learning_rate is not None:
+        kwargs = {"learning_rate": learning_rate, "threshold_min": threshold_min}
+    return GridArchive(
+        solution_dim=solution_dim,
+        dims=list(cells),
+        ranges=[(0.0, 1.0)] * len(cells),
+        solution_dtype=np.float32,
+        extra_fields=extra_fields,
+        seed=seed,
+        **kwargs,
+    )
+
+
+@dataclass
+class RunArchives:
+    """The three archives of a run (see the module docstring)."""
+
+    main: GridArchive
+    true: GridArchive
+    learned: GridArchive
+
+    def add(
+        self,
+        solutions: np.ndarray,
+        objective: np.ndarray,
+        true_objective: np.ndarray,
+        measures: np.ndarray,
+        fields: dict[str, np.ndarray],
+    ) -> None:
+        """Insert solutions into the passive archives (the scheduler fills ``main``)."""
+        self.true.add(solutions, true_objective, measures, **fields)
+        dummy = np.zeros((len(solutions), 1), dtype=np.float32)
+        self.learned.add(dummy, objective, measures, length=fields["length"])
+
+
+def qd_metrics(archive: ArchiveBase, offset: float = 0.0) -> dict[str, float]:
+    """QD metrics of an archive, from pyribs' ``archive.stats``.
+
+    Args:
+        archive: a GridArchive with a ``length`` field.
+        offset: per-step offset of the offset QD-Score.
+
+    Returns:
+        ``qd_score`` (Σ objectives: the QDIL/WQDIL papers' QD-Score), ``qd_score_offset``
+        (Σ objective + offset·length: PPGA's), ``coverage`` (fraction of cells),
+        ``obj_max`` (best), ``obj_mean`` (average), ``num_elites``.
+    """
+    stats = archive.stats
+    empty = stats.num_elites == 0
+    offset_score = 0.0
+    if not empty:
+        data = archive.data(["objective", "length"])
+        offset_score = float(np.sum(data["objective"] + offset * data["length"]))
+    return {
+        "qd_score": float(stats.qd_score),
+        "qd_score_offset": offset_score,
+        "coverage": float(stats.coverage),
+        "obj_max": float("nan") if empty else float(stats.obj_max),
+        "obj_mean": float("nan") if empty else float(stats.obj_mean),
+        "num_elites": float(stats.num_elites),
+    }

@@ -1,0 +1,122 @@
+"""Checkpoints: everything a killed run needs to continue as if it had never stopped.
+
+A checkpoint holds the pyribs scheduler (CMA-MAE archive, emitter, xNES, their random
+generators) pickled as bytes, the two passive archives, VPPO's critics, optimisers, return
+statistics and noise generator, the reward model's parameters, optimiser states and extra
+state, and the loop's counters and seed stream. It is written to a temporary file in the
+same folder, flushed to disk and renamed over ``checkpoints/last.pt``, so a crash at any
+moment leaves either the previous checkpoint or the new one, never half of one.
+"""
+
+from __future__ import annotations
+
+import os
+import pickle
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import torch
+
+if TYPE_CHECKING:
+    from qdil.run import Run
+
+FORMAT_VERSION = 1
+CHECKPOINT = Path("checkpoints") / "last.pt"
+
+
+class CheckpointError(RuntimeError):
+    """A checkpoint is missing, corrupt or from an incompatible run."""
+
+
+def atomic_write(path: Path, write: Any) -> None:
+    """Call ``write(file)`` on a temporary file, fsync it, then rename it over ``path``."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    try:
+        with open(tmp, "wb") as file:
+            write(file)
+            file.flush()
+            os.fsync(file.fileno())
+        os.replace(tmp, path)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+    directory = os.open(path.parent, os.O_RDONLY)
+    try:
+        os.fsync(directory)
+    finally:
+        os.close(directory)
+
+
+def save_checkpoint(run: Run) -> Path:
+    """Write the run's full state to ``<run_dir>/checkpoints/last.pt`` atomically."""
+    reward = run.reward
+    state = {
+        "format": FORMAT_VERSION,
+        "task": run.task,
+        "iteration": run.state.iteration,
+        "env_steps": run.state.env_steps,
+        "seconds": run.state.seconds,
+        "rng": run.state.rng.bit_generator.state,
+        "torch_rng": torch.get_rng_state(),
+        "scheduler": pickle.dumps(run.scheduler, protocol=pickle.HIGHEST_PROTOCOL),
+        "true_archive": pickle.dumps(run.archives.true, protocol=pickle.HIGHEST_PROTOCOL),
+        "learned_archive": pickle.dumps(run.archives.learned, protocol=pickle.HIGHEST_PROTOCOL),
+        "vppo": run.vppo.state_dict(),
+        "reward": {
+            "class": f"{type(reward).__module__}.{type(reward).__qualname__}",
+            "state_dict": reward.state_dict(),
+            "optimizers": [opt.state_dict() for opt in run.reward_optimizers],
+            "extra": reward.extra_state(),
+        },
+    }
+    path = run.run_dir / CHECKPOINT
+    atomic_write(path, lambda file: torch.save(state, file))
+    return path
+
+
+def load_checkpoint(run: Run) -> None:
+    """Restore :func:`save_checkpoint`'s state into a freshly built run of the same config.
+
+    Raises:
+        CheckpointError: if the file is missing, unreadable, of another format version, or
+            was written by a run of another task or reward model.
+    """
+    path = run.run_dir / CHECKPOINT
+    if not path.exists():
+        raise CheckpointError(f"no checkpoint at {path}; the run stopped before its first one")
+    try:
+        state = torch.load(path, weights_only=False)  # our own file: pickled pyribs objects
+    except Exception as error:
+        raise CheckpointError(f"{path} is not a readable qdil checkpoint: {error}") from error
+    if state.get("format") != FORMAT_VERSION:
+        raise CheckpointError(
+            f"{path} has format {state.get('format')!r}; this qdil reads format {FORMAT_VERSION}"
+        )
+    if state["task"] != run.task:
+        raise CheckpointError(f"{path} belongs to a {state['task']} run, not {run.task}")
+    reward_class = f"{type(run.reward).__module__}.{type(run.reward).__qualname__}"
+    if state["reward"]["class"] != reward_class:
+        raise CheckpointError(
+            f"{path} holds a {state['reward']['class']} reward model; the config builds "
+            f"{reward_class}"
+        )
+    run.state.iteration = state["iteration"]
+    run.state.env_steps = state["env_steps"]
+    run.state.seconds = state["seconds"]
+    run.state.rng = np.random.default_rng()
+    run.state.rng.bit_generator.state = state["rng"]
+    torch.set_rng_state(state["torch_rng"])
+    run.scheduler = pickle.loads(state["scheduler"])
+    run.emitter = run.scheduler.emitters[0]
+    run.archives.main = run.scheduler.archive
+    run.archives.true = pickle.loads(state["true_archive"])
+    run.archives.learned = pickle.loads(state["learned_archive"])
+    run.vppo.load_state_dict(state["vppo"])
+    run.reward.load_state_dict(state["reward"]["state_dict"])
+    for optimizer, opt_state in zip(
+        run.reward_optimizers, state["reward"]["optimizers"], strict=True
+    ):
+        optimizer.load_state_dict(opt_state)
+    run.reward.load_extra_state(state["reward"]["extra"])

@@ -1,0 +1,199 @@
+"""``run_qd``: the QD-IL loop (the paper's Algorithm 1), one explicit iteration at a time.
+
+Each iteration:
+
+1. ``ask_dqd`` gives the search policy θ_μ; VPPO estimates ∇f and ∇m at θ_μ with rewards
+   from the reward model; θ_μ is scored and ``tell_dqd`` inserts it with its Jacobian.
+2. ``ask`` branches λ solutions θ_μ + Σ c_j ĝ_j; each is scored on a few episodes; ``tell``
+   inserts them, ranks the coefficients by archive improvement and adapts xNES (or restarts
+   θ_μ at a random elite when nothing improved).
+3. VPPO walks θ_μ along c_0·r̂ + Σ c_j·δ_j with c the xNES mean.
+4. The reward model updates once on expert transitions and this iteration's policy
+   transitions (decision D3).
+5. Metrics are logged and, every K iterations, a checkpoint is written.
+
+The CMA-MAE archive and xNES see returns under the reward model (+bonus); every
+evaluation also records the true return into the passive ``true`` archive, which gives
+all reported metrics (decision D1).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import torch
+
+from qdil.data import Rollout, TransitionBatch
+from qdil.qd.archives import QD_OFFSETS, qd_metrics
+from qdil.rl.collect import Evaluation
+from qdil.rl.normalize import RunningMeanStd
+
+if TYPE_CHECKING:
+    from qdil.run import Run
+
+
+@dataclass
+class LoopState:
+    """Counters and the seed stream of a run; all of it goes into checkpoints."""
+
+    iteration: int = 0
+    env_steps: int = 0
+    seconds: float = 0.0
+    rng: np.random.Generator = field(default_factory=np.random.default_rng)
+
+    def next_seed(self) -> int:
+        """A fresh seed for the next environment reset."""
+        return int(self.rng.integers(2**31 - 1))
+
+
+def stats_from_fields(fields: dict[str, np.ndarray]) -> RunningMeanStd:
+    """Observation statistics of P policies from their archive fields (P, ...) or (...)."""
+    stats = RunningMeanStd.__new__(RunningMeanStd)
+    stats.mean = torch.as_tensor(np.atleast_2d(fields["obs_mean"]), dtype=torch.float64)
+    stats.var = torch.as_tensor(np.atleast_2d(fields["obs_var"]), dtype=torch.float64)
+    stats.count = torch.as_tensor(np.atleast_1d(fields["obs_count"]), dtype=torch.float64)
+    return stats
+
+
+def fields_from_stats(stats: RunningMeanStd, lengths: np.ndarray) -> dict[str, np.ndarray]:
+    """Archive fields (P, ...) of P policies: their statistics and episode lengths."""
+    return {
+        "obs_mean": stats.mean.numpy().copy(),
+        "obs_var": stats.var.numpy().copy(),
+        "obs_count": stats.count.numpy().copy(),
+        "length": np.asarray(lengths, dtype=np.float64),
+    }
+
+
+def reward_functions(run: Run) -> tuple[Any, Any]:
+    """The rewards VPPO trains on and the evaluation's objective, with finiteness checks."""
+    reward = run.reward
+
+    def checked(rewards: torch.Tensor) -> torch.Tensor:
+        reward.check_finite(rewards, "rewards", run.state.iteration)
+        return rewards
+
+    def train_reward(rollout: Rollout) -> torch.Tensor:
+        return checked(reward.predict_reward(rollout, update=True))
+
+    def eval_reward(rollout: Rollout) -> torch.Tensor:
+        return checked(reward.predict_reward(rollout))
+
+    uses_true = run.qd.fitness == "true" or reward.is_true_reward
+    return train_reward, (None if uses_true else eval_reward)
+
+
+def _objective(run: Run, evaluation: Evaluation) -> np.ndarray:
+    return evaluation.true_objective if run.qd.fitness == "true" else evaluation.objective
+
+
+def qd_iteration(run: Run) -> dict[str, float]:
+    """One iteration of Algorithm 1; returns its metrics."""
+    state, vppo, scheduler, emitter = run.state, run.vppo, run.scheduler, run.emitter
+    train_reward, eval_reward = reward_functions(run)
+    qd = run.qd
+    timings: dict[str, float] = {}
+    tic = time.perf_counter()
+
+    # ---- 1. gradients at θ_μ, and θ_μ itself into the archives
+    theta = scheduler.ask_dqd()[0]
+    stats = stats_from_fields(emitter.theta_fields)
+    jacobian_phase = vppo.compute_jacobian(theta, stats, train_reward, state.next_seed())
+    jacobian = (jacobian_phase.solutions.astype(np.float64) - theta)[None]
+    timings["jacobian"] = time.perf_counter() - tic
+    mean_eval = vppo.evaluate(theta[None], stats, qd.mean_episodes, state.next_seed(),
+                              eval_reward, qd.deterministic_eval)  # fmt: skip
+    fields = fields_from_stats(stats, mean_eval.lengths)
+    scheduler.tell_dqd(_objective(run, mean_eval), mean_eval.measures, jacobian, **fields)
+    run.archives.add(theta[None], mean_eval.objective, mean_eval.true_objective,
+                     mean_eval.measures, fields)  # fmt: skip
+
+    # ---- 2. branch, score, insert, adapt the coefficient distribution
+    branches = scheduler.ask()
+    branch_stats = RunningMeanStd.stack([stats] * len(branches))
+    tic_eval = time.perf_counter()
+    evaluation = vppo.evaluate(branches, branch_stats, qd.branch_episodes, state.next_seed(),
+                               eval_reward, qd.deterministic_eval)  # fmt: skip
+    timings["evaluate"] = time.perf_counter() - tic_eval
+    fields = fields_from_stats(branch_stats, evaluation.lengths)
+    restarts = emitter.restarts
+    scheduler.tell(_objective(run, evaluation), evaluation.measures, **fields)
+    run.archives.add(branches, evaluation.objective, evaluation.true_objective,
+                     evaluation.measures, fields)  # fmt: skip
+
+    # ---- 3. walk θ_μ along the coefficient mean
+    tic_walk = time.perf_counter()
+    walk = vppo.walk(emitter.theta, stats_from_fields(emitter.theta_fields),
+                     emitter.coefficient_mean, train_reward, state.next_seed())  # fmt: skip
+    emitter.theta = walk.solutions[0]
+    emitter.theta_fields = {
+        k: v[0] for k, v in fields_from_stats(walk.stats, [0.0]).items() if k != "length"
+    }
+    timings["walk"] = time.perf_counter() - tic_walk
+
+    # ---- 4. reward model update (once per iteration, on this iteration's policy data)
+    reward_metrics: dict[str, float] = {}
+    if run.reward.learned:
+        tic_reward = time.perf_counter()
+        policy = TransitionBatch.cat([r.transitions() for r in walk.rollouts])
+        reward_metrics = run.reward.update(run.expert, policy, state.iteration)
+        for key, value in reward_metrics.items():
+            run.reward.check_finite(torch.as_tensor(value), f"update metric {key}", state.iteration)
+        timings["reward_update"] = time.perf_counter() - tic_reward
+
+    # ---- 5. metrics
+    seconds = time.perf_counter() - tic
+    steps = (jacobian_phase.env_steps + walk.env_steps + mean_eval.env_steps
+             + evaluation.env_steps)  # fmt: skip
+    state.env_steps += steps
+    state.seconds += seconds
+    offset = QD_OFFSETS.get(run.task, 0.0)
+    metrics = {f"qd/{k}": v for k, v in qd_metrics(run.archives.true, offset).items()}
+    if not run.reward.is_true_reward:
+        metrics |= {
+            f"qd_learned/{k}": v for k, v in qd_metrics(run.archives.learned, offset).items()
+        }
+    metrics |= {f"rl/jacobian_{k}": v for k, v in jacobian_phase.diagnostics.items()}
+    metrics |= {f"rl/walk_{k}": v for k, v in walk.diagnostics.items()}
+    returns, _ = vppo.collector.pop_episode_stats()
+    if returns:
+        metrics["rl/train_episode_return"] = float(np.mean(returns))
+    metrics |= {f"reward/{k}": float(v) for k, v in reward_metrics.items()}
+    metrics |= {
+        "search/objective": float(_objective(run, mean_eval)[0]),
+        "search/true_objective": float(mean_eval.true_objective[0]),
+        "emitter/restarts": float(emitter.restarts),
+        "emitter/restarted": float(emitter.restarts > restarts),
+        "emitter/improved": float(getattr(emitter, "last_improved", np.nan)),
+        "perf/env_steps": float(state.env_steps),
+        "perf/sps": steps / seconds,
+        "perf/iter_seconds": seconds,
+        "perf/elapsed_seconds": state.seconds,
+    }
+    for j, value in enumerate(mean_eval.measures[0]):
+        metrics[f"search/measure_{j}"] = float(value)
+    for j, value in enumerate(emitter.coefficient_mean):
+        metrics[f"emitter/coefficient_{j}"] = float(value)
+    metrics |= {f"perf/{k}_seconds": v for k, v in timings.items()}
+    return metrics
+
+
+def run_qd(run: Run) -> None:
+    """Run iterations until ``qd.iterations``, logging and checkpointing as configured."""
+    from qdil.qd.checkpoint import save_checkpoint
+
+    progress = run.tracker.progress(run.state.iteration, run.qd.iterations)
+    try:
+        while run.state.iteration < run.qd.iterations:
+            run.state.iteration += 1
+            metrics = qd_iteration(run)
+            run.tracker.log(metrics, run.state.iteration, run)
+            progress.update(metrics)
+            every = run.logging.checkpoint_every
+            if run.state.iteration % every == 0 or run.state.iteration == run.qd.iterations:
+                save_checkpoint(run)
+    finally:
+        progress.close()

@@ -1,0 +1,153 @@
+"""``RewardModel``: the contract between reward plugins and the QD loop.
+
+A reward model is a LightningModule with manual optimisation, driven by Lightning Fabric
+from the QD loop (never ``Trainer.fit`` per iteration). It has two faces, as in
+``imitation``: a differentiable :meth:`RewardModel.reward` that :meth:`update` trains, and a
+no-grad :meth:`RewardModel.predict_reward` that hands per-step rewards to RL.
+
+Lifecycle, driven by the QD loop:
+
+1. ``__init__(obs_dim, action_dim, num_measures, **hyperparameters)``: build networks.
+2. ``setup(demos)`` once: fit the input normalisation on the demonstrations and do any
+   offline fitting (PWIL's expert atoms, GIRIL's pretraining). Lightning's own ``setup``
+   hook is never called under Fabric, so the name is free for this purpose.
+3. Every QD iteration: ``predict_reward(rollout, update=True)`` on the training rollouts,
+   ``predict_reward(rollout)`` on evaluation episodes, then one ``update(expert, policy,
+   iteration)`` on expert and policy transitions (decision D3).
+
+Class attributes declare what the model needs, so the loop never dispatches on names.
+"""
+
+from __future__ import annotations
+
+from typing import Any, ClassVar
+
+import lightning as L
+import torch
+
+from qdil.data import Rollout, TransitionBatch
+from qdil.demos.dataset import DemoSet
+
+
+class NonFiniteRewardError(RuntimeError):
+    """A reward model produced NaN or inf rewards or losses."""
+
+
+class RewardModel(L.LightningModule):
+    """Base class of every reward model (built-in or plugin).
+
+    Args:
+        obs_dim: observation size.
+        action_dim: action size.
+        num_measures: k, the number of foot-contact flags in δ(s).
+
+    Attributes:
+        name: registry key (set by :func:`qdil.rewards.register_reward`).
+        description: one line shown by ``qdil rewards list``.
+        learned: ``update`` trains the model online (False for fixed rewards).
+        needs_demos: ``setup`` needs demonstrations.
+        uses_measures: the reward reads δ(s) (measure conditioning).
+        needs_next_obs: the reward reads s_{t+1}.
+        needs_log_probs: the update reads the policy's log-probabilities (AIRL).
+        is_true_reward: the rewards are exactly the task's true rewards.
+    """
+
+    name: ClassVar[str] = ""
+    description: ClassVar[str] = ""
+    learned: ClassVar[bool] = True
+    needs_demos: ClassVar[bool] = True
+    uses_measures: ClassVar[bool] = False
+    needs_next_obs: ClassVar[bool] = False
+    needs_log_probs: ClassVar[bool] = False
+    is_true_reward: ClassVar[bool] = False
+
+    def __init__(self, obs_dim: int, action_dim: int, num_measures: int) -> None:
+        super().__init__()
+        for label, value in (
+            ("obs_dim", obs_dim),
+            ("action_dim", action_dim),
+            ("num_measures", num_measures),
+        ):
+            if int(value) < 1:
+                raise ValueError(f"{type(self).__name__}: {label} must be positive, got {value}")
+        self.automatic_optimization = False
+        self.obs_dim, self.action_dim, self.num_measures = (
+            int(obs_dim),
+            int(action_dim),
+            int(num_measures),
+        )
+        # input normalisation shared by expert and policy data (decision D4), fit in setup()
+        self.register_buffer("obs_mean", torch.zeros(self.obs_dim))
+        self.register_buffer("obs_std", torch.ones(self.obs_dim))
+        self.register_buffer("action_mean", torch.zeros(self.action_dim))
+        self.register_buffer("action_std", torch.ones(self.action_dim))
+
+    # -------------------------------------------------------------- lifecycle
+    def setup(self, demos: DemoSet | None) -> None:  # type: ignore[override]
+        """Fit the input normalisation on the demonstrations; subclasses extend it.
+
+        Args:
+            demos: the expert demonstrations, or ``None`` when ``needs_demos`` is False.
+        """
+        if demos is None:
+            return
+        batch = demos.transitions()
+        self.obs_mean.copy_(batch.obs.mean(0))
+        self.obs_std.copy_(batch.obs.std(0).clamp_min(1e-3))
+        self.action_mean.copy_(batch.actions.mean(0))
+        self.action_std.copy_(batch.actions.std(0).clamp_min(1e-3))
+
+    def reward(self, batch: TransitionBatch) -> torch.Tensor:
+        """(B,) differentiable reward of transitions; what :meth:`update` trains."""
+        raise NotImplementedError(f"{type(self).__name__} must implement reward(batch)")
+
+    def update(
+        self, expert: TransitionBatch, policy: TransitionBatch, iteration: int
+    ) -> dict[str, float]:
+        """One reward-model update per QD iteration; returns metrics to log.
+
+        Args:
+            expert: expert transitions from the demonstrations.
+            policy: transitions of the current search policy from this iteration.
+            iteration: the QD iteration (Lightning's ``global_step`` is 0 under Fabric).
+        """
+        return {}
+
+    @torch.no_grad()
+    def predict_reward(self, rollout: Rollout, *, update: bool = False) -> torch.Tensor:
+        """(T, N) per-step rewards for RL, without gradients.
+
+        Args:
+            rollout: time-major transitions.
+            update: the rollout is a training rollout whose visits count (the exploration
+                bonus counts them); False for evaluation episodes.
+        """
+        was_training = self.training
+        self.eval()
+        rewards = self.reward(rollout.flat()).reshape(rollout.rewards.shape)
+        self.train(was_training)
+        return rewards
+
+    # ----------------------------------------------------------------- helpers
+    def normalize_obs(self, obs: torch.Tensor) -> torch.Tensor:
+        """Observations standardised with the demonstrations' statistics."""
+        return (obs - self.obs_mean) / self.obs_std
+
+    def normalize_actions(self, actions: torch.Tensor) -> torch.Tensor:
+        """Actions standardised with the demonstrations' statistics."""
+        return (actions - self.action_mean) / self.action_std
+
+    def check_finite(self, value: torch.Tensor, what: str, iteration: int) -> None:
+        """Raise :class:`NonFiniteRewardError` naming the model, the value and the iteration."""
+        if not torch.isfinite(value).all():
+            raise NonFiniteRewardError(
+                f"reward model {self.name or type(self).__name__}: non-finite {what} at QD "
+                f"iteration {iteration}; lower its learning rate or raise its gradient penalty"
+            )
+
+    def extra_state(self) -> dict[str, Any]:
+        """State beyond ``state_dict`` (counters, pools) for checkpoints."""
+        return {}
+
+    def load_extra_state(self, state: dict[str, Any]) -> None:
+        """Restore :meth:`extra_state`."""

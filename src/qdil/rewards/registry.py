@@ -1,0 +1,180 @@
+"""A small registry of reward models (in the spirit of timm's model registry).
+
+Three sources, in this order:
+
+1. built-ins, registered by :func:`register_reward` when :mod:`qdil.rewards` is imported;
+2. installed packages, through the entry-point group ``qdil.rewards`` (each entry point
+   names a module to import or a ``RewardModel`` subclass);
+3. a local plugin folder (``./plugins`` by default, or the folders in ``$QDIL_PLUGIN_PATH``):
+   every ``*.py`` file and package directly inside it is imported.
+
+A name registered twice by different classes is an error, wherever they come from.
+"""
+
+from __future__ import annotations
+
+import importlib
+import importlib.metadata
+import importlib.util
+import inspect
+import os
+import sys
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from qdil.rewards.base import RewardModel
+
+ENTRY_POINT_GROUP = "qdil.rewards"
+LOCAL_PACKAGE = "qdil_local_plugins"
+
+
+@dataclass(frozen=True)
+class RegisteredReward:
+    """A registry entry: the class and where it came from."""
+
+    name: str
+    cls: type[RewardModel]
+    source: str
+
+    @property
+    def description(self) -> str:
+        """The class's one-line description."""
+        doc = (self.cls.__doc__ or "").strip().splitlines()
+        return self.cls.description or (doc[0] if doc else "")
+
+
+_REGISTRY: dict[str, RegisteredReward] = {}
+_current_source = "qdil (built-in)"
+_discovered = False
+
+
+def register_reward(name: str) -> Callable[[type[RewardModel]], type[RewardModel]]:
+    """Class decorator: register a :class:`~qdil.rewards.RewardModel` under ``name``.
+
+    Raises:
+        TypeError: if the class is not a ``RewardModel`` subclass.
+        ValueError: if another class already has the name.
+    """
+    from qdil.rewards.base import RewardModel
+
+    if not name.isidentifier() or name != name.lower():
+        raise ValueError(f"reward names are lowercase identifiers, got {name!r}")
+
+    def decorator(cls: type[RewardModel]) -> type[RewardModel]:
+        if not (inspect.isclass(cls) and issubclass(cls, RewardModel)):
+            raise TypeError(f"@register_reward({name!r}) needs a RewardModel subclass, got {cls!r}")
+        existing = _REGISTRY.get(name)
+        if existing is not None and _qualname(existing.cls) != _qualname(cls):
+            raise ValueError(
+                f"reward name {name!r} is registered twice: {_qualname(existing.cls)} "
+                f"({existing.source}) and {_qualname(cls)} ({_current_source}); rename one"
+            )
+        cls.name = name
+        _REGISTRY[name] = RegisteredReward(name, cls, _current_source)
+        return cls
+
+    return decorator
+
+
+def _qualname(cls: type) -> str:
+    return f"{cls.__module__}.{cls.__qualname__}"
+
+
+def _load_entry_points() -> None:
+    global _current_source
+    from qdil.rewards.base import RewardModel
+
+    for entry_point in importlib.metadata.entry_points(group=ENTRY_POINT_GROUP):
+        dist = entry_point.dist.name if entry_point.dist else "unknown package"
+        _current_source = f"entry point {entry_point.name} ({dist})"
+        try:
+            loaded = entry_point.load()
+        except Exception as error:
+            raise ImportError(
+                f"reward plugin entry point {entry_point.name!r} = {entry_point.value!r} of "
+                f"{dist} failed to import: {error}"
+            ) from error
+        finally:
+            _current_source = "qdil (built-in)"
+        if inspect.isclass(loaded):
+            if not issubclass(loaded, RewardModel):
+                raise TypeError(
+                    f"entry point {entry_point.name!r} of {dist} names {loaded!r}, "
+                    "which is not a qdil RewardModel subclass"
+                )
+            if loaded.name not in _REGISTRY or _REGISTRY[loaded.name].cls is not loaded:
+                _current_source = f"entry point {entry_point.name} ({dist})"
+                register_reward(loaded.name or entry_point.name)(loaded)
+                _current_source = "qdil (built-in)"
+
+
+def plugin_folders() -> list[Path]:
+    """Local plugin folders: ``$QDIL_PLUGIN_PATH`` (``os.pathsep``-separated) or ``./plugins``."""
+    configured = os.environ.get("QDIL_PLUGIN_PATH")
+    if configured:
+        return [Path(p) for p in configured.split(os.pathsep) if p]
+    return [Path.cwd() / "plugins"]
+
+
+def _load_folder(folder: Path) -> None:
+    global _current_source
+    if not folder.is_dir():
+        return
+    # a namespace for the folder's modules, so that class paths re-import cleanly
+    package = sys.modules.get(LOCAL_PACKAGE)
+    if package is None:
+        spec = importlib.machinery.ModuleSpec(LOCAL_PACKAGE, None, is_package=True)
+        package = importlib.util.module_from_spec(spec)
+        package.__path__ = []
+        sys.modules[LOCAL_PACKAGE] = package
+    if str(folder) not in package.__path__:
+        package.__path__.append(str(folder))
+    for path in sorted(folder.iterdir()):
+        is_module = path.suffix == ".py" and path.stem.isidentifier() and path.stem != "__init__"
+        is_package = path.is_dir() and (path / "__init__.py").exists() and path.name.isidentifier()
+        if not (is_module or is_package):
+            continue
+        name = f"{LOCAL_PACKAGE}.{path.stem if is_module else path.name}"
+        if name in sys.modules:
+            continue
+        _current_source = f"local plugin {path}"
+        try:
+            importlib.import_module(name)
+        except Exception as error:
+            raise ImportError(f"local reward plugin {path} failed to import: {error}") from error
+        finally:
+            _current_source = "qdil (built-in)"
+
+
+def discover(force: bool = False) -> None:
+    """Import built-ins, entry-point plugins and local plugin folders (once)."""
+    global _discovered
+    if _discovered and not force:
+        return
+    importlib.import_module("qdil.rewards.builtin")
+    _load_entry_points()
+    for folder in plugin_folders():
+        _load_folder(folder)
+    _discovered = True
+
+
+def list_rewards() -> list[RegisteredReward]:
+    """Every registered reward model, sorted by name."""
+    discover()
+    return [_REGISTRY[name] for name in sorted(_REGISTRY)]
+
+
+def get_reward(name: str) -> type[RewardModel]:
+    """The class registered under ``name``.
+
+    Raises:
+        ValueError: for an unknown name, listing the known ones.
+    """
+    discover()
+    if name not in _REGISTRY:
+        known = ", ".join(sorted(_REGISTRY))
+        raise ValueError(f"unknown reward model {name!r}; registered: {known}")
+    return _REGISTRY[name].cls

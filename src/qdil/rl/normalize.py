@@ -1,0 +1,101 @@
+"""Running mean and variance, one set of statistics per policy.
+
+PPGA normalises observations per policy (each archive elite carries its own statistics) and
+normalises value targets per objective. Both use :class:`RunningMeanStd` with a leading
+policy axis P. Quirk Q1 of PPGA's code (mean initialised to 1, float32) is not copied: the
+mean starts at 0, the variance at 1, the count at a tiny epsilon, in float64.
+"""
+
+from __future__ import annotations
+
+import torch
+
+
+class RunningMeanStd:
+    """Per-policy running statistics of vectors, merged with Chan et al.'s parallel update.
+
+    Args:
+        num_policies: P, the number of independent statistics.
+        shape: shape of one sample, e.g. ``(obs_dim,)`` or ``()``.
+        epsilon: initial count, so that the first batch dominates.
+
+    Attributes:
+        mean: (P, *shape) float64.
+        var: (P, *shape) float64.
+        count: (P,) float64.
+    """
+
+    def __init__(self, num_policies: int, shape: tuple[int, ...] = (), epsilon: float = 1e-4):
+        self.mean = torch.zeros((num_policies, *shape), dtype=torch.float64)
+        self.var = torch.ones((num_policies, *shape), dtype=torch.float64)
+        self.count = torch.full((num_policies,), epsilon, dtype=torch.float64)
+
+    @property
+    def num_policies(self) -> int:
+        """P."""
+        return self.mean.shape[0]
+
+    def update(self, x: torch.Tensor) -> None:
+        """Merge a batch per policy.
+
+        Args:
+            x: (P, B, *shape) samples; policy i's statistics absorb ``x[i]``.
+        """
+        x = x.detach().to(torch.float64)
+        batch_mean = x.mean(dim=1)
+        batch_var = x.var(dim=1, unbiased=False)
+        batch_count = torch.full_like(self.count, x.shape[1])
+        delta = batch_mean - self.mean
+        total = self.count + batch_count
+        expand = (slice(None),) + (None,) * (self.mean.dim() - 1)
+        self.mean = self.mean + delta * (batch_count / total)[expand]
+        m2 = (
+            self.var * self.count[expand]
+            + batch_var * batch_count[expand]
+            + delta.square() * (self.count * batch_count / total)[expand]
+        )
+        self.var = m2 / total[expand]
+        self.count = total
+
+    def normalize(self, x: torch.Tensor, clip: float | None = None) -> torch.Tensor:
+        """(x - mean) / sqrt(var + 1e-8) per policy, optionally clipped to ±clip.
+
+        Args:
+            x: (P, B, *shape) values.
+            clip: bound of the result, or ``None``.
+        """
+        mean = self.mean.to(x.dtype).unsqueeze(1)
+        std = torch.sqrt(self.var + 1e-8).to(x.dtype).unsqueeze(1)
+        out = (x - mean) / std
+        return out.clamp(-clip, clip) if clip is not None else out
+
+    def denormalize(self, x: torch.Tensor) -> torch.Tensor:
+        """Inverse of :meth:`normalize` without clipping; x is (P, B, *shape)."""
+        mean = self.mean.to(x.dtype).unsqueeze(1)
+        std = torch.sqrt(self.var + 1e-8).to(x.dtype).unsqueeze(1)
+        return x * std + mean
+
+    def select(self, index: list[int] | torch.Tensor) -> RunningMeanStd:
+        """A copy holding the statistics of policies ``index``."""
+        out = RunningMeanStd.__new__(RunningMeanStd)
+        out.mean = self.mean[index].clone()
+        out.var = self.var[index].clone()
+        out.count = self.count[index].clone()
+        return out
+
+    def state_dict(self) -> dict[str, torch.Tensor]:
+        """The statistics, for checkpoints."""
+        return {"mean": self.mean.clone(), "var": self.var.clone(), "count": self.count.clone()}
+
+    def load_state_dict(self, state: dict[str, torch.Tensor]) -> None:
+        """Restore :meth:`state_dict`."""
+        self.mean, self.var, self.count = state["mean"], state["var"], state["count"]
+
+    @classmethod
+    def stack(cls, stats: list[RunningMeanStd]) -> RunningMeanStd:
+        """Concatenate statistics along P."""
+        out = cls.__new__(cls)
+        out.mean = torch.cat([s.mean for s in stats])
+        out.var = torch.cat([s.var for s in stats])
+        out.count = torch.cat([s.count for s in stats])
+        return out

@@ -1,0 +1,445 @@
+"""VPPO: PPGA's vectorised PPO, the gradient estimator and the walk of the search policy.
+
+Reads top to bottom (CleanRL style). Two phases use the same PPO update:
+
+1. ``compute_jacobian``: k+1 copies of the search policy θ_μ train side by side on one batch
+   of simulations for N1 PPO iterations. Copy 0 maximises the reward handed in by the QD
+   loop (learned, or the task's true reward); copy j maximises the per-step measure proxy
+   δ_j (foot j touching the floor after the step). The rows of the Jacobian are the
+   parameter deltas θ_j − θ_μ; the emitter normalises them.
+2. ``walk``: θ_μ trains N2 PPO iterations on c_0·r̂ + Σ_j c_j·δ_j with c the ES mean over
+   gradient coefficients (decision D2; the public QD-IL code drops Σ c_j δ_j).
+
+Implementation details, with PPGA's quirks (``ppga_qdil.md`` §1.9) decided deliberately:
+
+1. Diagonal-Gaussian MLP actor (tanh) and critics with orthogonal initialisation.
+2. Observations are normalised per policy; the statistics travel with each solution. The
+   Jacobian copies use θ_μ's statistics *frozen* (Q3: PPGA gives copies fresh statistics,
+   so their deltas live in a different input scale than θ_μ's branches); the walk updates
+   θ_μ's statistics after each rollout. Statistics start at mean 0, variance 1, float64
+   (Q1: PPGA starts the mean at 1, float32).
+3. Value targets are normalised per objective with running statistics; values are
+   de-normalised consistently before GAE (Q2: PPGA leaves the stored values normalised).
+4. Advantages are normalised per minibatch *per objective* (Q4: PPGA mixes f and m_j).
+5. GAE with γ = 0.99, λ = 0.95; a time-limit truncation bootstraps from the final state
+   (``bootstrap_truncation``; PPGA treats it as terminal).
+6. Clipped surrogate (0.2), clipped value loss (0.2, coefficient 2), no entropy bonus,
+   per-policy gradient clipping at 1.0 (PPGA clips all stacked copies jointly), early stop
+   of the epochs when the mean approximate KL exceeds ``target_kl``.
+7. Minibatches are shuffled within each policy's samples (PPGA takes contiguous,
+   unshuffled slices).
+8. Critics and their optimisers persist across QD iterations and restarts; the actor's
+   optimiser is new in every phase (as PPGA).
+9. With ``adaptive_std=False`` the log standard deviations stay 0 (σ = 1) and are not
+   trained, so Jacobian rows and branches leave them unchanged.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from qdil.data import Rollout
+from qdil.envs.vector import LocomotionVectorEnv
+from qdil.rl.collect import Collector, Evaluation, PolicyData, evaluate_policies
+from qdil.rl.gae import compute_gae
+from qdil.rl.networks import VectorizedActor, VectorizedCritic
+from qdil.rl.normalize import RunningMeanStd
+
+RewardFn = Callable[[Rollout], torch.Tensor]
+
+
+@dataclass(frozen=True)
+class PhaseResult:
+    """What a VPPO phase hands back to the QD loop.
+
+    Attributes:
+        solutions: (P, D) trained solutions (P = k+1 for the Jacobian, 1 for the walk).
+        stats: their observation statistics.
+        rollouts: the rollouts of the reward-trained policy (copy 0, or the walking θ_μ).
+        diagnostics: mean PPO diagnostics over the phase (``rl/...`` metrics).
+        env_steps: simulated env steps.
+    """
+
+    solutions: np.ndarray
+    stats: RunningMeanStd
+    rollouts: list[Rollout]
+    diagnostics: dict[str, float]
+    env_steps: int
+
+
+def _to_policies(x: torch.Tensor, num_policies: int) -> torch.Tensor:
+    """(T, N, ...) -> (P, N/P · T, ...): policy i's environments, env-major."""
+    steps, n = x.shape[:2]
+    x = x.transpose(0, 1).reshape(num_policies, n // num_policies, steps, *x.shape[2:])
+    return x.flatten(1, 2)
+
+
+def _from_policies(x: torch.Tensor, steps: int) -> torch.Tensor:
+    """Inverse of :func:`_to_policies`: (P, N/P · T, ...) -> (T, N, ...)."""
+    num_policies = x.shape[0]
+    x = x.reshape(num_policies, -1, steps, *x.shape[2:]).flatten(0, 1)
+    return x.transpose(0, 1)
+
+
+class VPPO:
+    """PPGA's gradient estimator and search-policy walk (paper Alg. 1, lines 4 and 16).
+
+    Defaults are the paper's (``ppga_qdil.md`` §3, Walker2d column).
+
+    Args:
+        rollout_length: steps per environment per PPO iteration.
+        jacobian_iterations: N1, PPO iterations of the k+1 copies.
+        walk_iterations: N2, PPO iterations of the walk.
+        num_minibatches: minibatches per epoch.
+        update_epochs: epochs per PPO iteration.
+        learning_rate: Adam learning rate of actors and critics.
+        adam_eps: Adam epsilon.
+        gamma: discount.
+        gae_lambda: GAE λ.
+        clip_coef: PPO ratio clip.
+        value_clip: value-loss clip (``None`` for an unclipped value loss).
+        vf_coef: value-loss weight.
+        ent_coef: entropy bonus weight.
+        max_grad_norm: per-policy gradient-norm clip.
+        target_kl: stop the epochs once the mean approximate KL exceeds it (``None``: never).
+        normalize_returns: learn normalised value targets.
+        obs_clip: bound of normalised observations.
+        adaptive_std: learn the log standard deviations (PPGA: False for Walker2d and
+            Humanoid, True for HalfCheetah).
+        bootstrap_truncation: bootstrap time-limit truncations from the final state.
+        actor_hidden: actor widths (paper: 128, 128).
+        critic_hidden: critic widths (paper: 256, 256).
+    """
+
+    def __init__(
+        self,
+        rollout_length: int = 128,
+        jacobian_iterations: int = 10,
+        walk_iterations: int = 10,
+        num_minibatches: int = 8,
+        update_epochs: int = 4,
+        learning_rate: float = 1e-3,
+        adam_eps: float = 1e-5,
+        gamma: float = 0.99,
+        gae_lambda: float = 0.95,
+        clip_coef: float = 0.2,
+        value_clip: float | None = 0.2,
+        vf_coef: float = 2.0,
+        ent_coef: float = 0.0,
+        max_grad_norm: float = 1.0,
+        target_kl: float | None = 0.008,
+        normalize_returns: bool = True,
+        obs_clip: float = 10.0,
+        adaptive_std: bool = False,
+        bootstrap_truncation: bool = True,
+        actor_hidden: Sequence[int] = (128, 128),
+        critic_hidden: Sequence[int] = (256, 256),
+    ) -> None:
+        for name, value in (
+            ("rollout_length", rollout_length), ("jacobian_iterations", jacobian_iterations),
+            ("walk_iterations", walk_iterations), ("num_minibatches", num_minibatches),
+            ("update_epochs", update_epochs),
+        ):  # fmt: skip
+            if value < 1:
+                raise ValueError(f"rl.{name} must be at least 1, got {value}")
+        self.rollout_length = rollout_length
+        self.jacobian_iterations = jacobian_iterations
+        self.walk_iterations = walk_iterations
+        self.num_minibatches = num_minibatches
+        self.update_epochs = update_epochs
+        self.learning_rate = learning_rate
+        self.adam_eps = adam_eps
+        self.gamma = gamma
+        self.gae_lambda = gae_lambda
+        self.clip_coef = clip_coef
+        self.value_clip = value_clip
+        self.vf_coef = vf_coef
+        self.ent_coef = ent_coef
+        self.max_grad_norm = max_grad_norm
+        self.target_kl = target_kl
+        self.normalize_returns = normalize_returns
+        self.obs_clip = obs_clip
+        self.adaptive_std = adaptive_std
+        self.bootstrap_truncation = bootstrap_truncation
+        self.actor_hidden = tuple(actor_hidden)
+        self.critic_hidden = tuple(critic_hidden)
+
+    # ------------------------------------------------------------------ setup
+    def setup(
+        self, train_env: LocomotionVectorEnv, eval_env: LocomotionVectorEnv, seed: int
+    ) -> None:
+        """Bind the environments and build the persistent critics.
+
+        Args:
+            train_env: ``SAME_STEP`` environment of the PPO phases; its N must be divisible
+                by k+1.
+            eval_env: ``DISABLED`` environment of the evaluations.
+            seed: seed of the critics' initialisation and the action noise.
+
+        Raises:
+            ValueError: if N is not divisible by k+1.
+        """
+        num_objectives = train_env.num_feet + 1
+        if train_env.num_envs % num_objectives:
+            raise ValueError(
+                f"env.num_envs={train_env.num_envs} must be divisible by k+1={num_objectives} "
+                "(one block of simulations per VPPO copy)"
+            )
+        self.train_env, self.eval_env = train_env, eval_env
+        self.collector = Collector(train_env, self.obs_clip)
+        self.obs_dim = train_env.single_observation_space.shape[0]
+        self.action_dim = train_env.single_action_space.shape[0]
+        self.num_objectives = num_objectives
+        self.generator = torch.Generator().manual_seed(seed)
+        self.jacobian_critic = VectorizedCritic(
+            num_objectives, self.obs_dim, self.critic_hidden, seed
+        )
+        self.walk_critic = VectorizedCritic(1, self.obs_dim, self.critic_hidden, seed + 1)
+        self.jacobian_critic_opt = self._adam(self.jacobian_critic.parameters())
+        self.walk_critic_opt = self._adam(self.walk_critic.parameters())
+        self.jacobian_returns = RunningMeanStd(num_objectives)
+        self.walk_returns = RunningMeanStd(1)
+
+    def _adam(self, params) -> torch.optim.Adam:
+        return torch.optim.Adam(params, lr=self.learning_rate, eps=self.adam_eps)
+
+    @property
+    def solution_dim(self) -> int:
+        """D, the length of a policy's flat parameter vector."""
+        return VectorizedActor.solution_dim(self.obs_dim, self.action_dim, self.actor_hidden)
+
+    def initial_solution(self, seed: int) -> np.ndarray:
+        """(D,) PPGA's initial policy θ_0."""
+        return VectorizedActor.initial_solution(
+            self.obs_dim, self.action_dim, self.actor_hidden, seed
+        )
+
+    def _actor(self, solutions: np.ndarray) -> VectorizedActor:
+        actor = VectorizedActor(len(solutions), self.obs_dim, self.action_dim, self.actor_hidden)
+        actor.set_solutions(solutions)
+        if not self.adaptive_std:
+            with torch.no_grad():
+                actor.log_std.zero_()
+            actor.log_std.requires_grad_(False)
+        return actor
+
+    # ------------------------------------------------------------- the phases
+    def compute_jacobian(
+        self, theta: np.ndarray, stats: RunningMeanStd, reward_fn: RewardFn, seed: int
+    ) -> PhaseResult:
+        """Estimate ∇f and ∇m_j at θ_μ as parameter deltas after N1 PPO iterations.
+
+        Args:
+            theta: (D,) search policy θ_μ.
+            stats: its observation statistics (one policy; used frozen).
+            reward_fn: per-step reward of the objective f, (T, N) from a rollout.
+            seed: reset seed of the simulations.
+
+        Returns:
+            ``solutions`` holds the trained copies; the Jacobian is ``solutions - theta``.
+        """
+        k1 = self.num_objectives
+        actor = self._actor(np.repeat(theta[None], k1, axis=0))
+        copies_stats = RunningMeanStd.stack([stats] * k1)
+        actor_opt = self._adam([p for p in actor.parameters() if p.requires_grad])
+        self.collector.start(seed)
+        block = self.train_env.num_envs // k1
+        rollouts, diagnostics = [], []
+        for _ in range(self.jacobian_iterations):
+            rollout, pdata = self.collector.collect(
+                actor, copies_stats, self.rollout_length, self.generator, update_stats=False
+            )
+            # copy 0: the reward of f; copy j: the measure proxy δ_j after the step
+            rewards = rollout.next_contacts.new_zeros(rollout.rewards.shape)
+            f_rollout = rollout.columns(0, block)
+            rewards[:, :block] = reward_fn(f_rollout)
+            for j in range(1, k1):
+                rewards[:, j * block : (j + 1) * block] = rollout.next_contacts[
+                    :, j * block : (j + 1) * block, j - 1
+                ]
+            diagnostics.append(
+                self._ppo_update(actor, actor_opt, self.jacobian_critic, self.jacobian_critic_opt,
+                                 self.jacobian_returns, rollout, pdata, rewards)
+            )  # fmt: skip
+            rollouts.append(f_rollout)
+        steps = self.jacobian_iterations * self.rollout_length * self.train_env.num_envs
+        return PhaseResult(actor.get_solutions(), copies_stats, rollouts, _mean(diagnostics), steps)
+
+    def walk(
+        self,
+        theta: np.ndarray,
+        stats: RunningMeanStd,
+        coefficients: np.ndarray,
+        reward_fn: RewardFn,
+        seed: int,
+    ) -> PhaseResult:
+        """Move θ_μ by N2 PPO iterations on c_0·r̂ + Σ_j c_j·δ_j.
+
+        Args:
+            theta: (D,) search policy θ_μ.
+            stats: its observation statistics (copied, then updated).
+            coefficients: (k+1,) gradient coefficients c, the ES mean.
+            reward_fn: per-step reward r̂, (T, N) from a rollout.
+            seed: reset seed of the simulations.
+
+        Returns:
+            ``solutions[0]`` is the moved θ_μ and ``stats`` its statistics.
+        """
+        actor = self._actor(theta[None])
+        stats = stats.select([0])
+        actor_opt = self._adam([p for p in actor.parameters() if p.requires_grad])
+        c = torch.as_tensor(coefficients, dtype=torch.float32)
+        self.collector.start(seed)
+        rollouts, diagnostics = [], []
+        for _ in range(self.walk_iterations):
+            rollout, pdata = self.collector.collect(
+                actor, stats, self.rollout_length, self.generator, update_stats=True
+            )
+            rewards = c[0] * reward_fn(rollout) + (rollout.next_contacts * c[1:]).sum(-1)
+            diagnostics.append(
+                self._ppo_update(actor, actor_opt, self.walk_critic, self.walk_critic_opt,
+                                 self.walk_returns, rollout, pdata, rewards)
+            )  # fmt: skip
+            rollouts.append(rollout)
+        steps = self.walk_iterations * self.rollout_length * self.train_env.num_envs
+        return PhaseResult(actor.get_solutions(), stats, rollouts, _mean(diagnostics), steps)
+
+    def evaluate(
+        self,
+        solutions: np.ndarray,
+        stats: RunningMeanStd,
+        episodes: int,
+        seed: int,
+        reward_fn: RewardFn | None = None,
+        deterministic: bool = False,
+    ) -> Evaluation:
+        """Score P solutions over ``episodes`` episodes each (see :func:`evaluate_policies`)."""
+        actor = VectorizedActor(len(solutions), self.obs_dim, self.action_dim, self.actor_hidden)
+        actor.set_solutions(solutions)  # exactly the stored policies, log σ included
+        return evaluate_policies(
+            self.eval_env, actor, stats, episodes, seed, reward_fn, deterministic,
+            self.obs_clip, self.generator,
+        )  # fmt: skip
+
+    # ---------------------------------------------------------------- PPO core
+    def _ppo_update(
+        self,
+        actor: VectorizedActor,
+        actor_opt: torch.optim.Optimizer,
+        critic: VectorizedCritic,
+        critic_opt: torch.optim.Optimizer,
+        return_stats: RunningMeanStd,
+        rollout: Rollout,
+        pdata: PolicyData,
+        rewards: torch.Tensor,
+    ) -> dict[str, float]:
+        """One PPO iteration: GAE on the rollout, then minibatch epochs. Returns diagnostics."""
+        num_policies, steps = actor.num_models, rollout.num_steps
+        obs = _to_policies(pdata.norm_obs, num_policies)
+        next_obs = _to_policies(pdata.norm_next_obs, num_policies)
+        # ---- values and GAE (in reward units; the critic works in normalised units)
+        with torch.no_grad():
+            values, next_values = critic(obs), critic(next_obs)
+            if self.normalize_returns:
+                values = return_stats.denormalize(values)
+                next_values = return_stats.denormalize(next_values)
+            terminated = rollout.terminated if self.bootstrap_truncation else rollout.dones
+            advantages, returns = compute_gae(
+                rewards, _from_policies(values, steps), _from_policies(next_values, steps),
+                rollout.dones, terminated, self.gamma, self.gae_lambda,
+            )  # fmt: skip
+            returns = _to_policies(returns, num_policies)
+            if self.normalize_returns:
+                return_stats.update(returns)
+                returns = return_stats.normalize(returns)
+                values = return_stats.normalize(values)
+        advantages = _to_policies(advantages, num_policies)
+        actions = _to_policies(pdata.actions, num_policies)
+        old_log_probs = _to_policies(pdata.log_probs, num_policies)
+
+        # ---- minibatch epochs
+        batch = obs.shape[1]
+        minibatch = max(1, batch // self.num_minibatches)
+        stats: dict[str, list[float]] = {
+            k: [] for k in ("policy_loss", "value_loss", "entropy", "approx_kl", "clipfrac")
+        }
+        epochs = 0
+        for _ in range(self.update_epochs):
+            epochs += 1
+            order = torch.randperm(batch, generator=self.generator)
+            for start in range(0, batch - minibatch + 1, minibatch):
+                idx = order[start : start + minibatch]
+                dist = actor.distribution(obs[:, idx])
+                new_log_probs = dist.log_prob(actions[:, idx]).sum(-1)
+                log_ratio = new_log_probs - old_log_probs[:, idx]
+                ratio = log_ratio.exp()
+                with torch.no_grad():
+                    approx_kl = ((ratio - 1) - log_ratio).mean(1)
+                    clipfrac = ((ratio - 1).abs() > self.clip_coef).float().mean(1)
+                adv = advantages[:, idx]
+                adv = (adv - adv.mean(1, keepdim=True)) / (adv.std(1, keepdim=True) + 1e-8)
+                pg_loss = torch.max(
+                    -adv * ratio, -adv * ratio.clamp(1 - self.clip_coef, 1 + self.clip_coef)
+                ).mean(1)
+                new_values = critic(obs[:, idx])
+                v_loss = (new_values - returns[:, idx]).square()
+                if self.value_clip is not None:
+                    clipped = values[:, idx] + (new_values - values[:, idx]).clamp(
+                        -self.value_clip, self.value_clip
+                    )
+                    v_loss = torch.max(v_loss, (clipped - returns[:, idx]).square())
+                v_loss = 0.5 * v_loss.mean(1)
+                entropy = dist.entropy().sum(-1).mean(1)
+                # a sum over policies keeps their gradients independent
+                loss = (pg_loss - self.ent_coef * entropy + self.vf_coef * v_loss).sum()
+                actor_opt.zero_grad()
+                critic_opt.zero_grad()
+                loss.backward()
+                actor.clip_grad_norm_per_model(self.max_grad_norm)
+                critic.clip_grad_norm_per_model(self.max_grad_norm)
+                actor_opt.step()
+                critic_opt.step()
+                step_stats = {
+                    "policy_loss": pg_loss, "value_loss": v_loss, "entropy": entropy,
+                    "approx_kl": approx_kl, "clipfrac": clipfrac,
+                }  # fmt: skip
+                for key, value in step_stats.items():
+                    stats[key].append(float(value.detach().mean()))
+            if self.target_kl is not None and float(approx_kl.mean()) > self.target_kl:
+                break
+        with torch.no_grad():
+            explained = 1 - (returns - values).var() / (returns.var() + 1e-8)
+        out = {key: float(np.mean(values_)) for key, values_ in stats.items()}
+        out.update(explained_variance=float(explained), epochs=float(epochs))
+        return out
+
+    # ------------------------------------------------------------ checkpoints
+    def state_dict(self) -> dict:
+        """Critics, their optimisers, return statistics and the noise generator."""
+        return {
+            "jacobian_critic": self.jacobian_critic.state_dict(),
+            "walk_critic": self.walk_critic.state_dict(),
+            "jacobian_critic_opt": self.jacobian_critic_opt.state_dict(),
+            "walk_critic_opt": self.walk_critic_opt.state_dict(),
+            "jacobian_returns": self.jacobian_returns.state_dict(),
+            "walk_returns": self.walk_returns.state_dict(),
+            "generator": self.generator.get_state(),
+        }
+
+    def load_state_dict(self, state: dict) -> None:
+        """Restore :meth:`state_dict` (after :meth:`setup`)."""
+        self.jacobian_critic.load_state_dict(state["jacobian_critic"])
+        self.walk_critic.load_state_dict(state["walk_critic"])
+        self.jacobian_critic_opt.load_state_dict(state["jacobian_critic_opt"])
+        self.walk_critic_opt.load_state_dict(state["walk_critic_opt"])
+        self.jacobian_returns.load_state_dict(state["jacobian_returns"])
+        self.walk_returns.load_state_dict(state["walk_returns"])
+        self.generator.set_state(state["generator"])
+
+
+def _mean(diagnostics: list[dict[str, float]]) -> dict[str, float]:
+    return {key: float(np.mean([d[key] for d in diagnostics])) for key in diagnostics[0]}

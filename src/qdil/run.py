@@ -1,0 +1,176 @@
+"""Wiring a recipe into a runnable QD-IL run (and back from a run directory on resume)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import lightning as L
+import numpy as np
+import torch
+from ribs.emitters import EmitterBase
+from ribs.schedulers import Scheduler
+
+from qdil.config import BonusConfig, DemoConfig, EnvConfig, LoggingConfig, QDConfig, RewardFactory
+from qdil.data import TransitionBatch
+from qdil.demos.dataset import DemoSet
+from qdil.envs.vector import LocomotionVectorEnv
+from qdil.qd.archives import RunArchives, elite_fields, make_grid
+from qdil.qd.emitter import PPGAEmitter
+from qdil.qd.loop import LoopState
+from qdil.rewards.base import RewardModel
+from qdil.rl.networks import VectorizedActor
+from qdil.rl.normalize import RunningMeanStd
+from qdil.rl.vppo import VPPO
+from qdil.tracking import Tracker
+
+
+@dataclass
+class Run:
+    """Everything a QD-IL run holds. Built by :func:`build_run`; looped by ``run_qd``."""
+
+    name: str
+    run_dir: Path
+    task: str
+    seed: int
+    qd: QDConfig
+    logging: LoggingConfig
+    env: LocomotionVectorEnv
+    eval_env: LocomotionVectorEnv
+    vppo: VPPO
+    reward: RewardModel
+    reward_optimizers: list[torch.optim.Optimizer]
+    fabric: L.Fabric
+    scheduler: Scheduler
+    emitter: EmitterBase
+    archives: RunArchives
+    demos: DemoSet | None
+    expert: TransitionBatch | None
+    state: LoopState
+    tracker: Tracker
+
+
+def _seeds(seed: int, count: int) -> list[int]:
+    return [int(s.generate_state(1)[0]) for s in np.random.SeedSequence(seed).spawn(count)]
+
+
+def build_run(
+    *,
+    name: str,
+    run_dir: Path,
+    seed: int,
+    env: EnvConfig,
+    rl: VPPO,
+    reward: RewardFactory,
+    bonus: BonusConfig,
+    demos: DemoConfig,
+    qd: QDConfig,
+    logging: LoggingConfig,
+    config: dict[str, Any],
+) -> Run:
+    """Build every component of a run from the instantiated recipe sections.
+
+    Raises:
+        ValueError: for inconsistent settings, naming the recipe key.
+    """
+    _, vppo_seed, emitter_seed, archive_seed, loop_seed, torch_seed, x0_seed = _seeds(seed, 7)
+    torch.manual_seed(torch_seed)
+
+    # ---- environments and the policy space
+    train_env = LocomotionVectorEnv(
+        env.task, env.num_envs, max_episode_steps=env.max_episode_steps,
+        autoreset_mode="SameStep", num_threads=env.num_threads, **env.task_kwargs,
+    )  # fmt: skip
+    obs_dim = train_env.single_observation_space.shape[0]
+    action_dim = train_env.single_action_space.shape[0]
+    k = train_env.num_feet
+    solution_dim = VectorizedActor.solution_dim(obs_dim, action_dim, rl.actor_hidden)
+
+    # ---- archives, emitter, scheduler (pyribs)
+    fields = elite_fields(obs_dim)
+    cells = [qd.cells] * k
+    archive_seeds = np.random.SeedSequence(archive_seed).generate_state(3)
+    main = make_grid(
+        solution_dim=solution_dim, cells=cells, extra_fields=fields,
+        learning_rate=qd.archive_learning_rate, threshold_min=qd.threshold_min,
+        seed=int(archive_seeds[0]),
+    )  # fmt: skip
+    archives = RunArchives(
+        main=main,
+        true=make_grid(
+            solution_dim=solution_dim, cells=cells, extra_fields=fields, seed=int(archive_seeds[1])
+        ),
+        learned=make_grid(solution_dim=1, cells=cells, extra_fields={"length": fields["length"]},
+                          seed=int(archive_seeds[2])),
+    )  # fmt: skip
+    x0 = VectorizedActor.initial_solution(obs_dim, action_dim, rl.actor_hidden, x0_seed)
+    theta_stats = RunningMeanStd(1, (obs_dim,))
+    theta_fields = {
+        "obs_mean": theta_stats.mean[0].numpy(),
+        "obs_var": theta_stats.var[0].numpy(),
+        "obs_count": theta_stats.count[0].numpy(),
+    }
+    if qd.emitter is None:
+        emitter = PPGAEmitter(main, x0, seed=emitter_seed)
+    else:
+        emitter = qd.emitter(main, x0, seed=emitter_seed)
+    if not hasattr(emitter, "theta_fields"):
+        raise ValueError(
+            "qd.emitter must be a PPGA-style emitter with theta, theta_fields and "
+            "coefficient_mean (e.g. qdil.qd.PPGAEmitter)"
+        )
+    emitter.theta_fields = theta_fields
+    scheduler = (
+        Scheduler(main, [emitter], add_mode="batch")
+        if qd.scheduler is None
+        else qd.scheduler(main, [emitter])
+    )
+
+    # ---- evaluation environment and VPPO
+    eval_size = env.eval_envs or max(emitter.batch_size * qd.branch_episodes, qd.mean_episodes)
+    eval_env = LocomotionVectorEnv(
+        env.task, eval_size, max_episode_steps=env.max_episode_steps,
+        autoreset_mode="Disabled", num_threads=env.num_threads, **env.task_kwargs,
+    )  # fmt: skip
+    rl.setup(train_env, eval_env, vppo_seed)
+
+    # ---- reward model, driven by Lightning Fabric
+    model = reward(obs_dim, action_dim, k)
+    if not isinstance(model, RewardModel):
+        raise ValueError(f"reward: {type(model).__name__} is not a qdil RewardModel")
+    if bonus.enabled:
+        from qdil.rewards.bonus import ExplorationBonus
+
+        model = ExplorationBonus(model, weight=bonus.weight, cells=bonus.cells)
+    demo_set = None
+    if model.needs_demos:
+        if demos.path is None:
+            label = model.name or type(model).__name__
+            raise ValueError(f"demos.path: the {label} reward model needs demonstrations")
+        from qdil.demos.io import load_demos
+
+        demo_set = load_demos(demos.path, task=env.task, num_episodes=demos.num_episodes)
+    fabric = L.Fabric(accelerator="cpu", devices=1)
+    optimizers = model.configure_optimizers() if model.learned else None
+    optimizers = (
+        []
+        if optimizers is None
+        else list(optimizers)
+        if isinstance(optimizers, list | tuple)
+        else [optimizers]
+    )
+    if optimizers:
+        _, *optimizers = fabric.setup(model, *optimizers)
+    model.setup(demo_set)
+    expert = demo_set.transitions() if demo_set is not None else None
+
+    run_dir.mkdir(parents=True, exist_ok=True)
+    tracker = Tracker(run_dir, logging, name, config)
+    return Run(
+        name=name, run_dir=run_dir, task=env.task, seed=seed, qd=qd, logging=logging,
+        env=train_env, eval_env=eval_env, vppo=rl, reward=model, reward_optimizers=optimizers,
+        fabric=fabric, scheduler=scheduler, emitter=emitter, archives=archives,
+        demos=demo_set, expert=expert, state=LoopState(rng=np.random.default_rng(loop_seed)),
+        tracker=tracker,
+    )  # fmt: skip

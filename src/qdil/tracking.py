@@ -1,0 +1,165 @@
+"""Metrics of a run: ``metrics.csv`` always, W&B through Lightning's logger, a progress bar.
+
+Metric names (one row per QD iteration, keyed by ``iteration``):
+
+- ``qd/*``: the true-return archive (``qd_score``, ``qd_score_offset``, ``coverage``,
+  ``obj_max``, ``obj_mean``, ``num_elites``); the numbers reports use.
+- ``qd_learned/*``: the same on the learned-return archive (imitation runs only).
+- ``search/*``: the search policy θ_μ (objective, true objective, measures).
+- ``emitter/*``: restarts, branches that improved the archive, coefficient mean.
+- ``rl/*``: PPO diagnostics of the Jacobian and walk phases, training episode returns.
+- ``reward/*``: whatever the reward model's ``update`` returns.
+- ``perf/*``: env steps, env-steps/s, seconds per iteration and per phase.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import os
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from tqdm.auto import tqdm
+
+from qdil.qd.checkpoint import atomic_write
+
+if TYPE_CHECKING:
+    from qdil.config import LoggingConfig
+    from qdil.run import Run
+
+
+class MetricsCSV:
+    """An append-only CSV of metric rows that widens its header when new keys appear.
+
+    Args:
+        path: the CSV file.
+    """
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.keys: list[str] = []
+        if path.exists():
+            with open(path, newline="") as file:
+                self.keys = list(csv.DictReader(file).fieldnames or [])
+
+    def rows(self) -> list[dict[str, str]]:
+        """Every row written so far."""
+        if not self.path.exists():
+            return []
+        with open(self.path, newline="") as file:
+            return list(csv.DictReader(file))
+
+    def _rewrite(self, rows: list[dict[str, Any]]) -> None:
+        def write(file: Any) -> None:
+            text = _TextFile(file)
+            writer = csv.DictWriter(text, fieldnames=self.keys)
+            writer.writeheader()
+            writer.writerows(rows)
+
+        atomic_write(self.path, write)
+
+    def truncate(self, last_iteration: int) -> None:
+        """Drop rows after ``last_iteration`` (logged after the checkpoint a run resumes from)."""
+        rows = [row for row in self.rows() if int(float(row["iteration"])) <= last_iteration]
+        self._rewrite(rows)
+
+    def write(self, row: dict[str, Any]) -> None:
+        """Append one row (rewriting the file if it brings new keys)."""
+        new = [key for key in row if key not in self.keys]
+        if new:
+            old = self.rows()
+            self.keys += new
+            self._rewrite(old)
+        with open(self.path, "a", newline="") as file:
+            csv.DictWriter(file, fieldnames=self.keys).writerow(row)
+            file.flush()
+            os.fsync(file.fileno())
+
+
+class _TextFile:
+    """Adapts a binary file to csv's text writer."""
+
+    def __init__(self, file: Any) -> None:
+        self.file = file
+
+    def write(self, text: str) -> int:
+        return self.file.write(text.encode())
+
+
+class Progress:
+    """A progress bar: iteration, QD-Score, coverage, best return, env-steps/s."""
+
+    def __init__(self, start: int, total: int, enabled: bool) -> None:
+        self.bar = tqdm(
+            total=total, initial=start, disable=not enabled, unit="itr", dynamic_ncols=True
+        )
+
+    def update(self, metrics: dict[str, float]) -> None:
+        """Advance one iteration and show its headline metrics."""
+        self.bar.set_postfix(
+            qd=f"{metrics['qd/qd_score']:.3g}",
+            cov=f"{100 * metrics['qd/coverage']:.1f}%",
+            best=f"{metrics['qd/obj_max']:.0f}" if not math.isnan(metrics["qd/obj_max"]) else "-",
+            sps=f"{metrics['perf/sps']:.0f}",
+            refresh=False,
+        )
+        self.bar.update(1)
+
+    def close(self) -> None:
+        """Close the bar."""
+        self.bar.close()
+
+
+class Tracker:
+    """Writes every iteration's metrics to ``metrics.csv`` and, if enabled, to W&B.
+
+    Args:
+        run_dir: the run directory.
+        logging: the recipe's logging section.
+        name: the run name (W&B run name and id).
+        config: the resolved recipe, logged to W&B.
+    """
+
+    def __init__(self, run_dir: Path, logging: LoggingConfig, name: str, config: dict) -> None:
+        self.run_dir = run_dir
+        self.logging = logging
+        self.csv = MetricsCSV(run_dir / "metrics.csv")
+        self.wandb = None
+        if logging.wandb != "disabled":
+            from lightning.pytorch.loggers import WandbLogger
+
+            self.wandb = WandbLogger(
+                name=name, id=name.replace("/", "-"), project=logging.wandb_project,
+                save_dir=str(run_dir), offline=logging.wandb == "offline", resume="allow",
+                config=config,
+            )  # fmt: skip
+
+    def progress(self, start: int, total: int) -> Progress:
+        """A progress bar from ``start`` to ``total`` iterations."""
+        return Progress(start, total, self.logging.progress)
+
+    def log(self, metrics: dict[str, float], iteration: int, run: Run) -> None:
+        """Record one iteration's metrics (and the archive heatmap every K iterations)."""
+        self.csv.write({"iteration": iteration, **metrics})
+        if self.wandb is not None:
+            self.wandb.log_metrics(metrics, step=iteration)
+            every = self.logging.heatmap_every
+            if every and (iteration % every == 0 or iteration == run.qd.iterations):
+                from qdil.evaluation.plots import archive_heatmap
+
+                figure = archive_heatmap(
+                    run.archives.true, title=f"{run.name} · iteration {iteration}"
+                )
+                self.wandb.log_image("archive/heatmap", [figure], step=iteration)
+
+    def finish(self, run: Run) -> None:
+        """Log the final archive as a table and close W&B."""
+        if self.wandb is None:
+            return
+        data = run.archives.true.data(["objective", "measures", "index"], return_type="pandas")
+        self.wandb.log_table("archive/elites", dataframe=data, step=run.state.iteration)
+        self.wandb.finalize("success")
+        import wandb
+
+        wandb.finish()

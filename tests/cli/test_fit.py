@@ -1,0 +1,103 @@
+"""``qdil fit`` through the real command line: smoke run, recipe errors, kill and resume."""
+
+from __future__ import annotations
+
+import csv
+import os
+import pickle
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+ROOT = Path(__file__).resolve().parents[2]
+SMOKE = ROOT / "recipes" / "smoke" / "walker_true.yaml"
+
+
+def qdil(*args: str, cwd: Path, check: bool = True) -> subprocess.CompletedProcess:
+    env = {**os.environ, "WANDB_MODE": "disabled", "QDIL_PLUGIN_PATH": str(cwd / "no-plugins")}
+    return subprocess.run(
+        [sys.executable, "-m", "qdil.cli", *args], cwd=cwd, env=env, check=check,
+        capture_output=True, text=True, timeout=600,
+    )  # fmt: skip
+
+
+def rows(run_dir: Path) -> list[dict[str, str]]:
+    with open(run_dir / "metrics.csv", newline="") as file:
+        return list(csv.DictReader(file))
+
+
+def final_archive(run_dir: Path) -> dict[str, np.ndarray]:
+    state = torch.load(run_dir / "checkpoints" / "last.pt", weights_only=False)
+    return pickle.loads(state["true_archive"]).data()
+
+
+def test_smoke_fit_writes_config_metrics_and_checkpoint(tmp_path: Path) -> None:
+    qdil("fit", str(SMOKE), "--name", "smoke", cwd=tmp_path)
+    run_dir = tmp_path / "runs" / "smoke"
+    config = (run_dir / "config.yaml").read_text()
+    assert "class_path: qdil.rewards.builtin.TrueReward" in config
+    assert "rollout_length: 16" in config and "sigma0: 1.0" in config  # resolved defaults
+    metrics = rows(run_dir)
+    assert [int(r["iteration"]) for r in metrics] == [1, 2, 3]
+    assert float(metrics[-1]["qd/num_elites"]) >= 3
+    assert float(metrics[-1]["perf/env_steps"]) > float(metrics[0]["perf/env_steps"])
+    assert (run_dir / "checkpoints" / "last.pt").exists()
+    again = qdil("fit", str(SMOKE), "--name", "smoke", cwd=tmp_path, check=False)
+    assert again.returncode != 0 and "qdil fit --resume" in again.stderr
+
+
+@pytest.mark.parametrize(
+    ("override", "message"),
+    [
+        (["--qd.fitness", "best"], "qd.fitness"),
+        (["--qd.itrations", "5"], "itrations"),
+        (["--reward", "gial"], "unknown reward model 'gial'; registered: "),
+        (["--env.task", "Walker3d-v5"], "known tasks: Walker2d-v5"),
+    ],
+)
+def test_bad_recipes_name_the_key(tmp_path: Path, override: list[str], message: str) -> None:
+    result = qdil("fit", str(SMOKE), *override, cwd=tmp_path, check=False)
+    assert result.returncode != 0
+    assert message in result.stderr
+
+
+def test_killed_run_resumes_to_the_same_archive(tmp_path: Path) -> None:
+    """SIGKILL mid-iteration after a checkpoint; the resumed run equals an unbroken one."""
+    args = ["--qd.iterations", "4", "--logging.checkpoint_every", "2"]
+    qdil("fit", str(SMOKE), *args, "--name", "unbroken", cwd=tmp_path)
+
+    env = {**os.environ, "WANDB_MODE": "disabled"}
+    process = subprocess.Popen(
+        [sys.executable, "-m", "qdil.cli", "fit", str(SMOKE), *args, "--name", "killed"],
+        cwd=tmp_path, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+    )  # fmt: skip
+    checkpoint = tmp_path / "runs" / "killed" / "checkpoints" / "last.pt"
+    deadline = time.time() + 300
+    while not checkpoint.exists() and process.poll() is None and time.time() < deadline:
+        time.sleep(0.05)
+    process.send_signal(signal.SIGKILL)
+    process.wait()
+    assert process.returncode == -signal.SIGKILL, "the run must be killed, not finish"
+    assert torch.load(checkpoint, weights_only=False)["iteration"] == 2
+
+    qdil("fit", "--resume", str(tmp_path / "runs" / "killed"), cwd=tmp_path)
+    unbroken, resumed = tmp_path / "runs" / "unbroken", tmp_path / "runs" / "killed"
+    assert [r["iteration"] for r in rows(resumed)] == ["1", "2", "3", "4"]
+    for a, b in zip(rows(unbroken), rows(resumed), strict=True):
+        for key in ("qd/qd_score", "qd/coverage", "search/true_objective", "emitter/coefficient_0"):
+            assert a[key] == b[key], key
+    expected, actual = final_archive(unbroken), final_archive(resumed)
+    order_e, order_a = np.argsort(expected["index"]), np.argsort(actual["index"])
+    for field in ("index", "objective", "measures", "solution", "obs_mean"):
+        np.testing.assert_array_equal(expected[field][order_e], actual[field][order_a])
+
+
+def test_resume_of_a_directory_without_a_run_is_refused(tmp_path: Path) -> None:
+    result = qdil("fit", "--resume", str(tmp_path), cwd=tmp_path, check=False)
+    assert result.returncode != 0 and "not a qdil run directory" in result.stderr
