@@ -5,6 +5,9 @@ from __future__ import annotations
 import os
 
 os.environ.setdefault("WANDB_MODE", "disabled")
+# one physics thread per test process: tests check results, not speed, and several
+# processes on few cores must not oversubscribe numba's thread pool
+os.environ.setdefault("QDIL_NUM_THREADS", "1")
 os.environ.setdefault("WANDB_SILENT", "true")
 
 import numpy as np
@@ -17,3 +20,20 @@ torch.set_num_threads(1)
 @pytest.fixture
 def rng() -> np.random.Generator:
     return np.random.default_rng(12345)
+
+
+@pytest.fixture(scope="session")
+def walker_demos(tmp_path_factory: pytest.TempPathFactory):
+    """A small Walker2d demonstration file the tests make themselves (two short episodes)."""
+    from qdil.demos.generate import record_episodes
+    from qdil.demos.io import save_demos
+    from qdil.rl.networks import VectorizedActor
+    from qdil.rl.normalize import RunningMeanStd
+
+    solutions = np.stack([VectorizedActor.initial_solution(17, 6, seed=s) for s in (0, 1)])
+    demos, qpos, qvel = record_episodes(
+        "Walker2d-v5", solutions, RunningMeanStd(2, (17,)), seed=3, max_episode_steps=60
+    )
+    path = tmp_path_factory.mktemp("demos") / "walker_tiny.npz"
+    save_demos(demos, path, qpos, qvel)
+    return path

@@ -81,6 +81,9 @@ class Rollout:
         log_probs: (T, N) log π(a_t | s_t) of the acting policy.
         valid: (T, N) 1.0 for real transitions; 0.0 pads evaluation rollouts after an
             environment's episode ended.
+        starts: (T, N) 1.0 where s_t is the first observation of an episode. Consecutive
+            training rollouts of one phase continue each other column by column, and every
+            phase begins with a reset, so stateful rewards (PWIL) can follow episodes.
     """
 
     obs: torch.Tensor
@@ -93,6 +96,7 @@ class Rollout:
     terminated: torch.Tensor
     log_probs: torch.Tensor
     valid: torch.Tensor
+    starts: torch.Tensor
 
     @property
     def num_steps(self) -> int:

@@ -79,9 +79,13 @@ def build_run(
 
     # ---- environments and the policy space
     train_env = LocomotionVectorEnv(
-        env.task, env.num_envs, max_episode_steps=env.max_episode_steps,
-        autoreset_mode="SameStep", num_threads=env.num_threads, **env.task_kwargs,
-    )  # fmt: skip
+        env.task,
+        env.num_envs,
+        max_episode_steps=env.max_episode_steps,
+        autoreset_mode="SameStep",
+        num_threads=env.num_threads,
+        **env.task_kwargs,
+    )
     obs_dim = train_env.single_observation_space.shape[0]
     action_dim = train_env.single_action_space.shape[0]
     k = train_env.num_feet
@@ -92,18 +96,25 @@ def build_run(
     cells = [qd.cells] * k
     archive_seeds = np.random.SeedSequence(archive_seed).generate_state(3)
     main = make_grid(
-        solution_dim=solution_dim, cells=cells, extra_fields=fields,
-        learning_rate=qd.archive_learning_rate, threshold_min=qd.threshold_min,
+        solution_dim=solution_dim,
+        cells=cells,
+        extra_fields=fields,
+        learning_rate=qd.archive_learning_rate,
+        threshold_min=qd.threshold_min,
         seed=int(archive_seeds[0]),
-    )  # fmt: skip
+    )
     archives = RunArchives(
         main=main,
         true=make_grid(
             solution_dim=solution_dim, cells=cells, extra_fields=fields, seed=int(archive_seeds[1])
         ),
-        learned=make_grid(solution_dim=1, cells=cells, extra_fields={"length": fields["length"]},
-                          seed=int(archive_seeds[2])),
-    )  # fmt: skip
+        learned=make_grid(
+            solution_dim=1,
+            cells=cells,
+            extra_fields={"length": fields["length"]},
+            seed=int(archive_seeds[2]),
+        ),
+    )
     x0 = VectorizedActor.initial_solution(obs_dim, action_dim, rl.actor_hidden, x0_seed)
     theta_stats = RunningMeanStd(1, (obs_dim,))
     theta_fields = {
@@ -130,15 +141,27 @@ def build_run(
     # ---- evaluation environment and VPPO
     eval_size = env.eval_envs or max(emitter.batch_size * qd.branch_episodes, qd.mean_episodes)
     eval_env = LocomotionVectorEnv(
-        env.task, eval_size, max_episode_steps=env.max_episode_steps,
-        autoreset_mode="Disabled", num_threads=env.num_threads, **env.task_kwargs,
-    )  # fmt: skip
+        env.task,
+        eval_size,
+        max_episode_steps=env.max_episode_steps,
+        autoreset_mode="Disabled",
+        num_threads=env.num_threads,
+        **env.task_kwargs,
+    )
     rl.setup(train_env, eval_env, vppo_seed)
 
-    # ---- reward model, driven by Lightning Fabric
+    # ---- reward model, driven by Lightning Fabric; the bonus wraps it afterwards
     model = reward(obs_dim, action_dim, k)
     if not isinstance(model, RewardModel):
         raise ValueError(f"reward: {type(model).__name__} is not a qdil RewardModel")
+    fabric = L.Fabric(accelerator="cpu", devices=1)
+    optimizers = model.configure_optimizers() if model.learned else None
+    if optimizers is None:
+        optimizers = []
+    elif not isinstance(optimizers, list | tuple):
+        optimizers = [optimizers]
+    if optimizers:
+        _, *optimizers = fabric.setup(model, *optimizers)
     if bonus.enabled:
         from qdil.rewards.bonus import ExplorationBonus
 
@@ -151,26 +174,29 @@ def build_run(
         from qdil.demos.io import load_demos
 
         demo_set = load_demos(demos.path, task=env.task, num_episodes=demos.num_episodes)
-    fabric = L.Fabric(accelerator="cpu", devices=1)
-    optimizers = model.configure_optimizers() if model.learned else None
-    optimizers = (
-        []
-        if optimizers is None
-        else list(optimizers)
-        if isinstance(optimizers, list | tuple)
-        else [optimizers]
-    )
-    if optimizers:
-        _, *optimizers = fabric.setup(model, *optimizers)
     model.setup(demo_set)
     expert = demo_set.transitions() if demo_set is not None else None
 
     run_dir.mkdir(parents=True, exist_ok=True)
     tracker = Tracker(run_dir, logging, name, config)
     return Run(
-        name=name, run_dir=run_dir, task=env.task, seed=seed, qd=qd, logging=logging,
-        env=train_env, eval_env=eval_env, vppo=rl, reward=model, reward_optimizers=optimizers,
-        fabric=fabric, scheduler=scheduler, emitter=emitter, archives=archives,
-        demos=demo_set, expert=expert, state=LoopState(rng=np.random.default_rng(loop_seed)),
+        name=name,
+        run_dir=run_dir,
+        task=env.task,
+        seed=seed,
+        qd=qd,
+        logging=logging,
+        env=train_env,
+        eval_env=eval_env,
+        vppo=rl,
+        reward=model,
+        reward_optimizers=optimizers,
+        fabric=fabric,
+        scheduler=scheduler,
+        emitter=emitter,
+        archives=archives,
+        demos=demo_set,
+        expert=expert,
+        state=LoopState(rng=np.random.default_rng(loop_seed)),
         tracker=tracker,
-    )  # fmt: skip
+    )

@@ -130,10 +130,14 @@ class Tracker:
             from lightning.pytorch.loggers import WandbLogger
 
             self.wandb = WandbLogger(
-                name=name, id=name.replace("/", "-"), project=logging.wandb_project,
-                save_dir=str(run_dir), offline=logging.wandb == "offline", resume="allow",
+                name=name,
+                id=name.replace("/", "-"),
+                project=logging.wandb_project,
+                save_dir=str(run_dir),
+                offline=logging.wandb == "offline",
+                resume="allow",
                 config=config,
-            )  # fmt: skip
+            )
 
     def progress(self, start: int, total: int) -> Progress:
         """A progress bar from ``start`` to ``total`` iterations."""

@@ -22,9 +22,14 @@ SMOKE = ROOT / "recipes" / "smoke" / "walker_true.yaml"
 def qdil(*args: str, cwd: Path, check: bool = True) -> subprocess.CompletedProcess:
     env = {**os.environ, "WANDB_MODE": "disabled", "QDIL_PLUGIN_PATH": str(cwd / "no-plugins")}
     return subprocess.run(
-        [sys.executable, "-m", "qdil.cli", *args], cwd=cwd, env=env, check=check,
-        capture_output=True, text=True, timeout=600,
-    )  # fmt: skip
+        [sys.executable, "-m", "qdil.cli", *args],
+        cwd=cwd,
+        env=env,
+        check=check,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
 
 
 def rows(run_dir: Path) -> list[dict[str, str]]:
@@ -75,8 +80,11 @@ def test_killed_run_resumes_to_the_same_archive(tmp_path: Path) -> None:
     env = {**os.environ, "WANDB_MODE": "disabled"}
     process = subprocess.Popen(
         [sys.executable, "-m", "qdil.cli", "fit", str(SMOKE), *args, "--name", "killed"],
-        cwd=tmp_path, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-    )  # fmt: skip
+        cwd=tmp_path,
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     checkpoint = tmp_path / "runs" / "killed" / "checkpoints" / "last.pt"
     deadline = time.time() + 300
     while not checkpoint.exists() and process.poll() is None and time.time() < deadline:

@@ -24,9 +24,12 @@ def lockstep(task: str, mode: AutoresetMode, steps: int, num_envs: int = 3, **kw
     """Steps qdil's and gymnasium's vector envs with the same actions; returns episode ends."""
     ours = gym.make_vec(f"qdil/{task}", num_envs=num_envs, autoreset_mode=mode, **kwargs)
     reference = gym.make_vec(
-        task, num_envs=num_envs, vectorization_mode="sync",
-        vector_kwargs={"autoreset_mode": mode}, **kwargs,
-    )  # fmt: skip
+        task,
+        num_envs=num_envs,
+        vectorization_mode="sync",
+        vector_kwargs={"autoreset_mode": mode},
+        **kwargs,
+    )
     obs, _ = ours.reset(seed=7)
     ref_obs, _ = reference.reset(seed=7)
     assert_close(obs, ref_obs, "reset observation")

@@ -22,8 +22,14 @@ def fields(n: int, value: float = 0.0) -> dict[str, np.ndarray]:
 
 @pytest.fixture
 def archive():
-    return make_grid(solution_dim=DIM, cells=[5, 5], extra_fields=elite_fields(OBS),
-                     learning_rate=0.5, threshold_min=0.0, seed=0)  # fmt: skip
+    return make_grid(
+        solution_dim=DIM,
+        cells=[5, 5],
+        extra_fields=elite_fields(OBS),
+        learning_rate=0.5,
+        threshold_min=0.0,
+        seed=0,
+    )
 
 
 def make_emitter(archive, **kwargs) -> PPGAEmitter:
@@ -35,8 +41,13 @@ def test_jacobian_rows_are_normalised_and_branches_follow_the_coefficients(archi
     assert emitter.ask_dqd().shape == (1, DIM)
     jacobian = np.zeros((1, 3, DIM))
     jacobian[0, 0, 0], jacobian[0, 1, 1], jacobian[0, 2, :2] = 5.0, -0.1, [3.0, 4.0]
-    emitter.tell_dqd(np.zeros((1, DIM)), np.zeros(1), np.zeros((1, 2)), jacobian,
-                     {"status": np.ones(1), "value": np.ones(1)})  # fmt: skip
+    emitter.tell_dqd(
+        np.zeros((1, DIM)),
+        np.zeros(1),
+        np.zeros((1, 2)),
+        jacobian,
+        {"status": np.ones(1), "value": np.ones(1)},
+    )
     branches = emitter.ask()
     assert branches.shape == (8, DIM)
     unit = np.zeros((3, DIM))
@@ -53,12 +64,22 @@ def test_initial_mean_follows_ppga_bounds(archive) -> None:
 
 
 def tell_round(emitter, archive, status: np.ndarray) -> np.ndarray:
-    emitter.tell_dqd(np.zeros((1, DIM)), np.zeros(1), np.zeros((1, 2)), np.ones((1, 3, DIM)),
-                     {"status": np.ones(1), "value": np.ones(1)})  # fmt: skip
+    emitter.tell_dqd(
+        np.zeros((1, DIM)),
+        np.zeros(1),
+        np.zeros((1, 2)),
+        np.ones((1, 3, DIM)),
+        {"status": np.ones(1), "value": np.ones(1)},
+    )
     branches = emitter.ask()
     values = np.linspace(1, -1, len(branches))
-    emitter.tell(branches, np.ones(len(branches)), np.full((len(branches), 2), 0.5),
-                 {"status": status, "value": values}, **fields(len(branches)))  # fmt: skip
+    emitter.tell(
+        branches,
+        np.ones(len(branches)),
+        np.full((len(branches), 2), 0.5),
+        {"status": status, "value": values},
+        **fields(len(branches)),
+    )
     return branches
 
 
@@ -100,8 +121,11 @@ def test_works_inside_a_pyribs_scheduler(archive) -> None:
             np.array([5.0]), np.array([[0.5, 0.5]]), rng.normal(size=(1, 3, DIM)), **fields(1)
         )
         branches = scheduler.ask()
-        scheduler.tell(rng.uniform(0, 10, len(branches)), rng.uniform(0, 1, (len(branches), 2)),
-                       **fields(len(branches)))  # fmt: skip
+        scheduler.tell(
+            rng.uniform(0, 10, len(branches)),
+            rng.uniform(0, 1, (len(branches), 2)),
+            **fields(len(branches)),
+        )
         emitter.theta = theta[0] + 0.1
     assert len(archive) > 5
 

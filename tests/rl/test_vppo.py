@@ -15,8 +15,14 @@ from qdil.rl.vppo import VPPO
 
 @pytest.fixture(scope="module")
 def vppo() -> VPPO:
-    algo = VPPO(rollout_length=16, jacobian_iterations=2, walk_iterations=2, num_minibatches=2,
-                update_epochs=2, target_kl=None)  # fmt: skip
+    algo = VPPO(
+        rollout_length=16,
+        jacobian_iterations=2,
+        walk_iterations=2,
+        num_minibatches=2,
+        update_epochs=2,
+        target_kl=None,
+    )
     train = LocomotionVectorEnv("Walker2d-v5", 6, max_episode_steps=40, autoreset_mode="SameStep")
     evaluation = LocomotionVectorEnv(
         "Walker2d-v5", 4, max_episode_steps=40, autoreset_mode="Disabled"
@@ -87,8 +93,14 @@ def test_collector_aligns_contacts_with_observations() -> None:
 
 def test_ppo_update_moves_the_policy_towards_higher_advantage() -> None:
     """One-step episodes rewarding the first action dimension: its mean must rise."""
-    algo = VPPO(rollout_length=64, num_minibatches=4, update_epochs=4, target_kl=None,
-                learning_rate=3e-3, adaptive_std=True)  # fmt: skip
+    algo = VPPO(
+        rollout_length=64,
+        num_minibatches=4,
+        update_epochs=4,
+        target_kl=None,
+        learning_rate=3e-3,
+        adaptive_std=True,
+    )
     env = LocomotionVectorEnv("HalfCheetah-v5", 6, autoreset_mode="SameStep")
     algo.setup(env, LocomotionVectorEnv("HalfCheetah-v5", 1, autoreset_mode="Disabled"), seed=0)
     actor = VectorizedActor(1, 17, 6)
@@ -104,8 +116,16 @@ def test_ppo_update_moves_the_policy_towards_higher_advantage() -> None:
         rewards = pdata.actions[..., 0]
         ones = torch.ones_like(rewards)
         rollout = dataclasses.replace(rollout, dones=ones, terminated=ones)
-        algo._ppo_update(actor, optimizer, algo.walk_critic, algo.walk_critic_opt,
-                         algo.walk_returns, rollout, pdata, rewards)  # fmt: skip
+        algo._ppo_update(
+            actor,
+            optimizer,
+            algo.walk_critic,
+            algo.walk_critic_opt,
+            algo.walk_returns,
+            rollout,
+            pdata,
+            rewards,
+        )
     with torch.no_grad():
         assert float(actor(obs)[0, 0, 0]) > before + 0.05
 

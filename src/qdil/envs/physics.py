@@ -158,7 +158,10 @@ class Export:
 
 
 def default_num_threads() -> int:
-    """Threads for physics: every core this process may run on."""
+    """Threads for physics: ``$QDIL_NUM_THREADS`` if set, else every core this process may use."""
+    configured = os.environ.get("QDIL_NUM_THREADS")
+    if configured:
+        return max(1, min(int(configured), numba.config.NUMBA_NUM_THREADS))
     try:
         cores = len(os.sched_getaffinity(0))
     except AttributeError:  # macOS and Windows have no affinity API
@@ -261,11 +264,20 @@ class MujocoBatch:
         """
         numba.set_num_threads(self.num_threads)
         _step_kernel(
-            self._model_ptr, self._data_ptrs, self._ctrl_ptrs, ctrl,
-            self._all if active is None else active, nstep, self.rne_post_constraint,
-            self._sources, self._lengths, self._offsets, self.exported,
-            self._sensor_ptrs, self.sensordata,
-        )  # fmt: skip
+            self._model_ptr,
+            self._data_ptrs,
+            self._ctrl_ptrs,
+            ctrl,
+            self._all if active is None else active,
+            nstep,
+            self.rne_post_constraint,
+            self._sources,
+            self._lengths,
+            self._offsets,
+            self.exported,
+            self._sensor_ptrs,
+            self.sensordata,
+        )
 
     def reset(self, ids: np.ndarray, qpos: np.ndarray, qvel: np.ndarray) -> None:
         """Reset simulations ``ids`` to the given states, as gymnasium's ``set_state``.
@@ -277,12 +289,20 @@ class MujocoBatch:
         """
         numba.set_num_threads(self.num_threads)
         _reset_kernel(
-            self._model_ptr, self._data_ptrs, np.ascontiguousarray(ids, dtype=np.int64),
-            self._qpos_ptrs, self._qvel_ptrs, np.ascontiguousarray(qpos, dtype=np.float64),
+            self._model_ptr,
+            self._data_ptrs,
+            np.ascontiguousarray(ids, dtype=np.int64),
+            self._qpos_ptrs,
+            self._qvel_ptrs,
+            np.ascontiguousarray(qpos, dtype=np.float64),
             np.ascontiguousarray(qvel, dtype=np.float64),
-            self._sources, self._lengths, self._offsets, self.exported,
-            self._sensor_ptrs, self.sensordata,
-        )  # fmt: skip
+            self._sources,
+            self._lengths,
+            self._offsets,
+            self.exported,
+            self._sensor_ptrs,
+            self.sensordata,
+        )
 
 
 def add_contact_sensors(spec: mujoco.MjSpec, geoms: Sequence[str], floor: str) -> None:

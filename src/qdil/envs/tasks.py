@@ -204,10 +204,17 @@ class Walker2d(_PlanarWalker):
         exclude_current_positions_from_observation: bool = True,
     ) -> None:
         super().__init__(
-            xml_file, frame_skip, forward_reward_weight, ctrl_cost_weight, healthy_reward,
-            terminate_when_unhealthy, healthy_z_range, healthy_angle_range, reset_noise_scale,
+            xml_file,
+            frame_skip,
+            forward_reward_weight,
+            ctrl_cost_weight,
+            healthy_reward,
+            terminate_when_unhealthy,
+            healthy_z_range,
+            healthy_angle_range,
+            reset_noise_scale,
             exclude_current_positions_from_observation,
-        )  # fmt: skip
+        )
 
     @override
     def is_healthy(self, x: Arrays) -> np.ndarray:
@@ -239,10 +246,17 @@ class Hopper(_PlanarWalker):
         exclude_current_positions_from_observation: bool = True,
     ) -> None:
         super().__init__(
-            xml_file, frame_skip, forward_reward_weight, ctrl_cost_weight, healthy_reward,
-            terminate_when_unhealthy, healthy_z_range, healthy_angle_range, reset_noise_scale,
+            xml_file,
+            frame_skip,
+            forward_reward_weight,
+            ctrl_cost_weight,
+            healthy_reward,
+            terminate_when_unhealthy,
+            healthy_z_range,
+            healthy_angle_range,
+            reset_noise_scale,
             exclude_current_positions_from_observation,
-        )  # fmt: skip
+        )
         self.healthy_state_range = _check_range("healthy_state_range", healthy_state_range)
 
     @override

@@ -273,8 +273,10 @@ class LocomotionVectorEnv(VectorEnv):
                 "r": np.where(done, self._return, 0.0),
                 "l": np.where(done, self._elapsed, 0),
                 "measures": np.where(done[:, None], self._contact_sum / length[:, None], 0.0),
-                "_r": done, "_l": done, "_measures": done,
-            }  # fmt: skip
+                "_r": done,
+                "_l": done,
+                "_measures": done,
+            }
             info["_episode"] = done
 
         if resetting.any():  # NEXT_STEP: these sub-environments reset now

@@ -120,3 +120,26 @@ def load_checkpoint(run: Run) -> None:
     ):
         optimizer.load_state_dict(opt_state)
     run.reward.load_extra_state(state["reward"]["extra"])
+
+
+def load_archive(run_dir: str | Path, which: str = "true") -> tuple[Any, int]:
+    """An archive of a run's last checkpoint: ``true``, ``learned`` or ``main`` (CMA-MAE).
+
+    Returns:
+        The pyribs archive and the iteration it was saved at.
+
+    Raises:
+        CheckpointError: if the run has no readable checkpoint.
+    """
+    path = Path(run_dir) / CHECKPOINT
+    if not path.exists():
+        raise CheckpointError(f"{run_dir}: no checkpoint at {path}")
+    try:
+        state = torch.load(path, weights_only=False)
+    except Exception as error:
+        raise CheckpointError(f"{path} is not a readable qdil checkpoint: {error}") from error
+    if which == "main":
+        return pickle.loads(state["scheduler"]).archive, state["iteration"]
+    if which not in ("true", "learned"):
+        raise ValueError(f"which must be true, learned or main, got {which!r}")
+    return pickle.loads(state[f"{which}_archive"]), state["iteration"]

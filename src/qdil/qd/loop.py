@@ -20,7 +20,8 @@ all reported metrics (decision D1).
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from functools import partial
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -104,30 +105,44 @@ def qd_iteration(run: Run) -> dict[str, float]:
     jacobian_phase = vppo.compute_jacobian(theta, stats, train_reward, state.next_seed())
     jacobian = (jacobian_phase.solutions.astype(np.float64) - theta)[None]
     timings["jacobian"] = time.perf_counter() - tic
-    mean_eval = vppo.evaluate(theta[None], stats, qd.mean_episodes, state.next_seed(),
-                              eval_reward, qd.deterministic_eval)  # fmt: skip
+    mean_eval = vppo.evaluate(
+        theta[None], stats, qd.mean_episodes, state.next_seed(), eval_reward, qd.deterministic_eval
+    )
     fields = fields_from_stats(stats, mean_eval.lengths)
     scheduler.tell_dqd(_objective(run, mean_eval), mean_eval.measures, jacobian, **fields)
-    run.archives.add(theta[None], mean_eval.objective, mean_eval.true_objective,
-                     mean_eval.measures, fields)  # fmt: skip
+    run.archives.add(
+        theta[None], mean_eval.objective, mean_eval.true_objective, mean_eval.measures, fields
+    )
 
     # ---- 2. branch, score, insert, adapt the coefficient distribution
     branches = scheduler.ask()
     branch_stats = RunningMeanStd.stack([stats] * len(branches))
     tic_eval = time.perf_counter()
-    evaluation = vppo.evaluate(branches, branch_stats, qd.branch_episodes, state.next_seed(),
-                               eval_reward, qd.deterministic_eval)  # fmt: skip
+    evaluation = vppo.evaluate(
+        branches,
+        branch_stats,
+        qd.branch_episodes,
+        state.next_seed(),
+        eval_reward,
+        qd.deterministic_eval,
+    )
     timings["evaluate"] = time.perf_counter() - tic_eval
     fields = fields_from_stats(branch_stats, evaluation.lengths)
     restarts = emitter.restarts
     scheduler.tell(_objective(run, evaluation), evaluation.measures, **fields)
-    run.archives.add(branches, evaluation.objective, evaluation.true_objective,
-                     evaluation.measures, fields)  # fmt: skip
+    run.archives.add(
+        branches, evaluation.objective, evaluation.true_objective, evaluation.measures, fields
+    )
 
     # ---- 3. walk θ_μ along the coefficient mean
     tic_walk = time.perf_counter()
-    walk = vppo.walk(emitter.theta, stats_from_fields(emitter.theta_fields),
-                     emitter.coefficient_mean, train_reward, state.next_seed())  # fmt: skip
+    walk = vppo.walk(
+        emitter.theta,
+        stats_from_fields(emitter.theta_fields),
+        emitter.coefficient_mean,
+        train_reward,
+        state.next_seed(),
+    )
     emitter.theta = walk.solutions[0]
     emitter.theta_fields = {
         k: v[0] for k, v in fields_from_stats(walk.stats, [0.0]).items() if k != "length"
@@ -139,15 +154,19 @@ def qd_iteration(run: Run) -> dict[str, float]:
     if run.reward.learned:
         tic_reward = time.perf_counter()
         policy = TransitionBatch.cat([r.transitions() for r in walk.rollouts])
-        reward_metrics = run.reward.update(run.expert, policy, state.iteration)
+        expert = run.expert
+        if run.reward.needs_log_probs:  # AIRL: both batches under the walked θ_μ
+            logp = partial(vppo.log_probs, walk.solutions[0], walk.stats)
+            expert = replace(expert, log_probs=logp(expert.obs, expert.actions))
+            policy = replace(policy, log_probs=logp(policy.obs, policy.actions))
+        reward_metrics = run.reward.update(expert, policy, state.iteration)
         for key, value in reward_metrics.items():
             run.reward.check_finite(torch.as_tensor(value), f"update metric {key}", state.iteration)
         timings["reward_update"] = time.perf_counter() - tic_reward
 
     # ---- 5. metrics
     seconds = time.perf_counter() - tic
-    steps = (jacobian_phase.env_steps + walk.env_steps + mean_eval.env_steps
-             + evaluation.env_steps)  # fmt: skip
+    steps = jacobian_phase.env_steps + walk.env_steps + mean_eval.env_steps + evaluation.env_steps
     state.env_steps += steps
     state.seconds += seconds
     offset = QD_OFFSETS.get(run.task, 0.0)

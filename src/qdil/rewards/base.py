@@ -50,6 +50,9 @@ class RewardModel(L.LightningModule):
         needs_next_obs: the reward reads s_{t+1}.
         needs_log_probs: the update reads the policy's log-probabilities (AIRL).
         is_true_reward: the rewards are exactly the task's true rewards.
+        prefers_expert: the reward is higher on expert-like transitions (True for
+            imitation rewards; False for curiosity rewards such as GIRIL's; None when it
+            does not compare, as the true reward). The contract tests check it.
     """
 
     name: ClassVar[str] = ""
@@ -60,6 +63,7 @@ class RewardModel(L.LightningModule):
     needs_next_obs: ClassVar[bool] = False
     needs_log_probs: ClassVar[bool] = False
     is_true_reward: ClassVar[bool] = False
+    prefers_expert: ClassVar[bool | None] = True
 
     def __init__(self, obs_dim: int, action_dim: int, num_measures: int) -> None:
         super().__init__()

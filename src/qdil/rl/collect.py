@@ -112,12 +112,14 @@ class Collector:
         self.episode_lengths: list[int] = []
         self._obs: torch.Tensor | None = None
         self._contacts: torch.Tensor | None = None
+        self._starts: torch.Tensor | None = None
 
     def start(self, seed: int) -> None:
         """Reset every simulation (the start of a VPPO phase)."""
         obs, info = self.env.reset(seed=seed)
         self._obs = torch.from_numpy(obs).float()
         self._contacts = torch.from_numpy(info["foot_contact"])
+        self._starts = torch.ones(len(obs))
 
     def collect(
         self,
@@ -157,6 +159,7 @@ class Collector:
             "dones": torch.zeros(shape),
             "terminated": torch.zeros(shape),
             "log_probs": torch.zeros(shape),
+            "starts": torch.zeros(shape),
         }
         norm_obs = torch.zeros((*shape, obs_dim))
         policy_actions = torch.zeros((*shape, action_dim))
@@ -186,10 +189,12 @@ class Collector:
             buf["dones"][t] = torch.from_numpy(done)
             buf["terminated"][t] = torch.from_numpy(terminated)
             buf["log_probs"][t] = log_probs
+            buf["starts"][t] = self._starts
             norm_obs[t] = norm
             policy_actions[t] = actions
             self._obs = torch.from_numpy(next_obs).float()
             self._contacts = contacts
+            self._starts = torch.from_numpy(done.astype(np.float32))
         rollout = Rollout(**buf, valid=torch.ones(shape))
         num_policies = actor.num_models
         next_by_policy = _blocks(buf["next_obs"].transpose(0, 1), num_policies).flatten(1, 2)
@@ -284,14 +289,21 @@ def evaluate_policies(
         next_t = torch.from_numpy(next_obs[:used]).float()
         next_contacts = torch.from_numpy(info["foot_contact"][:used])
         if record:
-            steps.append({
-                "obs": obs_t, "actions": executed, "contacts": contacts, "next_obs": next_t,
-                "next_contacts": next_contacts, "rewards": torch.from_numpy(reward[:used]).float(),
-                "dones": torch.from_numpy(done.astype(np.float32)),
-                "terminated": torch.from_numpy(terminated[:used].astype(np.float32)),
-                "log_probs": torch.zeros(used),
-                "valid": torch.from_numpy(active[:used].astype(np.float32)),
-            })  # fmt: skip
+            steps.append(
+                {
+                    "obs": obs_t,
+                    "actions": executed,
+                    "contacts": contacts,
+                    "next_obs": next_t,
+                    "next_contacts": next_contacts,
+                    "rewards": torch.from_numpy(reward[:used]).float(),
+                    "dones": torch.from_numpy(done.astype(np.float32)),
+                    "terminated": torch.from_numpy(terminated[:used].astype(np.float32)),
+                    "log_probs": torch.zeros(used),
+                    "valid": torch.from_numpy(active[:used].astype(np.float32)),
+                    "starts": torch.full((used,), float(not steps)),
+                }
+            )
         running[:used] &= ~done
         obs_t, contacts = next_t, next_contacts
     objective = returns

@@ -140,10 +140,12 @@ class VPPO:
         critic_hidden: Sequence[int] = (256, 256),
     ) -> None:
         for name, value in (
-            ("rollout_length", rollout_length), ("jacobian_iterations", jacobian_iterations),
-            ("walk_iterations", walk_iterations), ("num_minibatches", num_minibatches),
+            ("rollout_length", rollout_length),
+            ("jacobian_iterations", jacobian_iterations),
+            ("walk_iterations", walk_iterations),
+            ("num_minibatches", num_minibatches),
             ("update_epochs", update_epochs),
-        ):  # fmt: skip
+        ):
             if value < 1:
                 raise ValueError(f"rl.{name} must be at least 1, got {value}")
         self.rollout_length = rollout_length
@@ -262,9 +264,17 @@ class VPPO:
                     :, j * block : (j + 1) * block, j - 1
                 ]
             diagnostics.append(
-                self._ppo_update(actor, actor_opt, self.jacobian_critic, self.jacobian_critic_opt,
-                                 self.jacobian_returns, rollout, pdata, rewards)
-            )  # fmt: skip
+                self._ppo_update(
+                    actor,
+                    actor_opt,
+                    self.jacobian_critic,
+                    self.jacobian_critic_opt,
+                    self.jacobian_returns,
+                    rollout,
+                    pdata,
+                    rewards,
+                )
+            )
             rollouts.append(f_rollout)
         steps = self.jacobian_iterations * self.rollout_length * self.train_env.num_envs
         return PhaseResult(actor.get_solutions(), copies_stats, rollouts, _mean(diagnostics), steps)
@@ -301,9 +311,17 @@ class VPPO:
             )
             rewards = c[0] * reward_fn(rollout) + (rollout.next_contacts * c[1:]).sum(-1)
             diagnostics.append(
-                self._ppo_update(actor, actor_opt, self.walk_critic, self.walk_critic_opt,
-                                 self.walk_returns, rollout, pdata, rewards)
-            )  # fmt: skip
+                self._ppo_update(
+                    actor,
+                    actor_opt,
+                    self.walk_critic,
+                    self.walk_critic_opt,
+                    self.walk_returns,
+                    rollout,
+                    pdata,
+                    rewards,
+                )
+            )
             rollouts.append(rollout)
         steps = self.walk_iterations * self.rollout_length * self.train_env.num_envs
         return PhaseResult(actor.get_solutions(), stats, rollouts, _mean(diagnostics), steps)
@@ -321,9 +339,35 @@ class VPPO:
         actor = VectorizedActor(len(solutions), self.obs_dim, self.action_dim, self.actor_hidden)
         actor.set_solutions(solutions)  # exactly the stored policies, log σ included
         return evaluate_policies(
-            self.eval_env, actor, stats, episodes, seed, reward_fn, deterministic,
-            self.obs_clip, self.generator,
-        )  # fmt: skip
+            self.eval_env,
+            actor,
+            stats,
+            episodes,
+            seed,
+            reward_fn,
+            deterministic,
+            self.obs_clip,
+            self.generator,
+        )
+
+    def log_probs(
+        self, solution: np.ndarray, stats: RunningMeanStd, obs: torch.Tensor, actions: torch.Tensor
+    ) -> torch.Tensor:
+        """(B,) log π(a | s) of executed actions under one policy (for AIRL's discriminator).
+
+        Args:
+            solution: (D,) the policy.
+            stats: its observation statistics (one policy).
+            obs: (B, obs_dim) raw observations.
+            actions: (B, action_dim) executed actions, mapped back to the policy's [-1, 1].
+        """
+        actor = VectorizedActor(1, self.obs_dim, self.action_dim, self.actor_hidden)
+        actor.set_solutions(solution[None])
+        action_map = self.collector.action_map
+        policy_actions = (actions - action_map.low) / action_map.half - 1.0
+        with torch.no_grad():
+            norm = stats.normalize(obs[None].double(), clip=self.obs_clip).float()
+            return actor.distribution(norm).log_prob(policy_actions[None]).sum(-1)[0]
 
     # ---------------------------------------------------------------- PPO core
     def _ppo_update(
@@ -349,9 +393,14 @@ class VPPO:
                 next_values = return_stats.denormalize(next_values)
             terminated = rollout.terminated if self.bootstrap_truncation else rollout.dones
             advantages, returns = compute_gae(
-                rewards, _from_policies(values, steps), _from_policies(next_values, steps),
-                rollout.dones, terminated, self.gamma, self.gae_lambda,
-            )  # fmt: skip
+                rewards,
+                _from_policies(values, steps),
+                _from_policies(next_values, steps),
+                rollout.dones,
+                terminated,
+                self.gamma,
+                self.gae_lambda,
+            )
             returns = _to_policies(returns, num_policies)
             if self.normalize_returns:
                 return_stats.update(returns)
@@ -404,9 +453,12 @@ class VPPO:
                 actor_opt.step()
                 critic_opt.step()
                 step_stats = {
-                    "policy_loss": pg_loss, "value_loss": v_loss, "entropy": entropy,
-                    "approx_kl": approx_kl, "clipfrac": clipfrac,
-                }  # fmt: skip
+                    "policy_loss": pg_loss,
+                    "value_loss": v_loss,
+                    "entropy": entropy,
+                    "approx_kl": approx_kl,
+                    "clipfrac": clipfrac,
+                }
                 for key, value in step_stats.items():
                     stats[key].append(float(value.detach().mean()))
             if self.target_kl is not None and float(approx_kl.mean()) > self.target_kl:

@@ -22,6 +22,7 @@ class TrueReward(RewardModel):
     learned = False
     needs_demos = False
     is_true_reward = True
+    prefers_expert = None
 
     @override
     def reward(self, batch: TransitionBatch) -> torch.Tensor:

@@ -1,0 +1,81 @@
+"""``AdversarialReward``: what models trained on expert-versus-policy batches share.
+
+Inputs are x = (s, a) or, with measure conditioning, x = (s, a, δ(s)): observations and
+actions standardised with the demonstrations' statistics (the same for expert and policy
+data, decision D4), the 0/1 contact flags as they are. One update is ``epochs`` passes over
+the expert transitions in shuffled minibatches of ``batch_size``, each paired with as many
+policy transitions drawn from the iteration's rollouts ("Discriminator Num Epochs 1" in
+the paper's table). Every such model carries a gradient penalty (weight 10 by default), as
+the paper applies one to all online-trained reward models.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+
+import torch
+
+from qdil.data import TransitionBatch
+from qdil.rewards.base import RewardModel
+
+
+class AdversarialReward(RewardModel):
+    """Base of GAIL, AIRL, MaxEntIRL and the WAE family.
+
+    Args:
+        obs_dim: observation size.
+        action_dim: action size.
+        num_measures: k.
+        use_measures: condition on δ(s): x = (s, a, δ(s)) (the "mC" variants).
+        learning_rate: Adam learning rate (the paper: 3e-4).
+        batch_size: expert (and policy) transitions per gradient step.
+        epochs: passes over the expert transitions per QD iteration (the paper: 1).
+        gp_weight: weight of the gradient penalty (0 disables it).
+    """
+
+    def __init__(
+        self,
+        obs_dim: int,
+        action_dim: int,
+        num_measures: int,
+        *,
+        use_measures: bool = False,
+        learning_rate: float = 3e-4,
+        batch_size: int = 200,
+        epochs: int = 1,
+        gp_weight: float = 10.0,
+    ) -> None:
+        super().__init__(obs_dim, action_dim, num_measures)
+        if batch_size < 1 or epochs < 1:
+            raise ValueError(f"{type(self).__name__}: batch_size and epochs must be positive")
+        if gp_weight < 0:
+            raise ValueError(f"{type(self).__name__}: gp_weight must be >= 0, got {gp_weight}")
+        self.use_measures = use_measures
+        self.learning_rate = learning_rate
+        self.batch_size = batch_size
+        self.epochs = epochs
+        self.gp_weight = gp_weight
+
+    @property
+    def input_dim(self) -> int:
+        """Size of x."""
+        return self.obs_dim + self.action_dim + (self.num_measures if self.use_measures else 0)
+
+    def features(self, batch: TransitionBatch) -> torch.Tensor:
+        """(B, input_dim) x = (s, a[, δ(s)]), standardised where it is continuous."""
+        parts = [self.normalize_obs(batch.obs), self.normalize_actions(batch.actions)]
+        if self.use_measures:
+            parts.append(batch.contacts)
+        return torch.cat(parts, dim=1)
+
+    def minibatches(
+        self, expert: TransitionBatch, policy: TransitionBatch
+    ) -> Iterator[tuple[TransitionBatch, TransitionBatch]]:
+        """Pairs of (expert, policy) minibatches: ``epochs`` shuffled passes over the expert."""
+        if len(expert) == 0 or len(policy) == 0:
+            raise ValueError(f"{type(self).__name__}.update needs expert and policy transitions")
+        size = min(self.batch_size, len(expert))
+        for _ in range(self.epochs):
+            order = torch.randperm(len(expert))
+            for start in range(0, len(expert) - size + 1, size):
+                yield expert[order[start : start + size]], policy.sample(size)

@@ -1,0 +1,130 @@
+"""``airl``: Adversarial Inverse Reinforcement Learning (Fu, Luo & Levine, ICLR 2018).
+
+https://arxiv.org/abs/1710.11248. The discriminator has the structure
+D(s, a, s') = exp f / (exp f + π(a | s)) with f(s, a, s') = g(s, a) + γ h(s') − h(s): a reward
+term g and a shaping potential h. Its logit is f − log π(a | s), trained with binary
+cross-entropy (expert 1, policy 0) and a gradient penalty on f. The policy is rewarded with
+f (``reward_type="f"``, default: QD-IL evaluates many policies, so the reward must not
+depend on one policy's likelihood) or with the full logit f − log π.
+
+The QD loop fills both batches' log-probabilities with the current search policy's
+(``needs_log_probs``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Literal
+
+import torch
+import torch.nn.functional as F
+from typing_extensions import override
+
+from qdil.data import TransitionBatch
+from qdil.rewards.adversarial import AdversarialReward
+from qdil.rewards.nets import gradient_penalty, mlp
+from qdil.rewards.registry import register_reward
+
+
+@register_reward("airl")
+class AIRL(AdversarialReward):
+    """AIRL: f = g(s, a) + γ h(s') − h(s); reward f.
+
+    Args:
+        obs_dim: observation size.
+        action_dim: action size.
+        num_measures: k.
+        hidden: widths of g and h (the paper's discriminator: (100, 100)).
+        gamma: discount of the shaping term.
+        reward_type: ``f`` (default) or ``logit`` (f − log π of the transition's policy).
+        **kwargs: :class:`~qdil.rewards.adversarial.AdversarialReward` options.
+    """
+
+    description = "AIRL (Fu et al. 2018): shaped reward f = g(s,a) + gamma h(s') - h(s)"
+    needs_next_obs = True
+    needs_log_probs = True
+
+    def __init__(
+        self,
+        obs_dim: int,
+        action_dim: int,
+        num_measures: int,
+        *,
+        hidden: Sequence[int] = (100, 100),
+        gamma: float = 0.99,
+        reward_type: Literal["f", "logit"] = "f",
+        use_measures: bool = False,
+        learning_rate: float = 3e-4,
+        batch_size: int = 200,
+        epochs: int = 1,
+        gp_weight: float = 10.0,
+    ) -> None:
+        super().__init__(
+            obs_dim,
+            action_dim,
+            num_measures,
+            use_measures=use_measures,
+            learning_rate=learning_rate,
+            batch_size=batch_size,
+            epochs=epochs,
+            gp_weight=gp_weight,
+        )
+        self.gamma = gamma
+        self.reward_type = reward_type
+        self.g = mlp(self.input_dim, hidden, 1)
+        self.h = mlp(obs_dim, hidden, 1)
+
+    def _inputs(self, batch: TransitionBatch) -> torch.Tensor:
+        """(B, input_dim + obs_dim + 1): x, normalised s', done."""
+        return torch.cat(
+            [self.features(batch), self.normalize_obs(batch.next_obs), batch.dones[:, None]], dim=1
+        )
+
+    def f(self, inputs: torch.Tensor) -> torch.Tensor:
+        """The shaped score g + γ h(s') − h(s), (B,), from :meth:`_inputs`; h(final) = 0."""
+        x = inputs[:, : self.input_dim]
+        next_obs = inputs[:, self.input_dim : self.input_dim + self.obs_dim]
+        done = inputs[:, -1]
+        obs = x[:, : self.obs_dim]
+        g = self.g(x).squeeze(-1)
+        return g + self.gamma * (1 - done) * self.h(next_obs).squeeze(-1) - self.h(obs).squeeze(-1)
+
+    @override
+    def configure_optimizers(self) -> torch.optim.Optimizer:
+        return torch.optim.Adam(self.parameters(), lr=self.learning_rate)
+
+    @override
+    def reward(self, batch: TransitionBatch) -> torch.Tensor:
+        f = self.f(self._inputs(batch))
+        if self.reward_type == "logit":
+            return f - torch.nan_to_num(batch.log_probs, nan=0.0)
+        return f
+
+    @override
+    def update(
+        self, expert: TransitionBatch, policy: TransitionBatch, iteration: int
+    ) -> dict[str, float]:
+        for name, batch in (("expert", expert), ("policy", policy)):
+            if not torch.isfinite(batch.log_probs).all():
+                raise ValueError(f"airl needs the policy's log-probabilities of the {name} batch")
+        optimizer = self.optimizers()
+        sums = {"loss": 0.0, "gp": 0.0, "expert_acc": 0.0, "policy_acc": 0.0}
+        steps = 0
+        for expert_mb, policy_mb in self.minibatches(expert, policy):
+            in_e, in_p = self._inputs(expert_mb), self._inputs(policy_mb)
+            logit_e = self.f(in_e) - expert_mb.log_probs
+            logit_p = self.f(in_p) - policy_mb.log_probs
+            loss = F.binary_cross_entropy_with_logits(logit_e, torch.ones_like(logit_e))
+            loss = loss + F.binary_cross_entropy_with_logits(logit_p, torch.zeros_like(logit_p))
+            gp = gradient_penalty(self.f, in_e, in_p) if self.gp_weight else torch.zeros(())
+            loss = loss + self.gp_weight * gp
+            self.check_finite(loss.detach(), "discriminator loss", iteration)
+            optimizer.zero_grad()
+            self.manual_backward(loss)
+            optimizer.step()
+            sums["loss"] += float(loss.detach())
+            sums["gp"] += float(gp.detach())
+            sums["expert_acc"] += float((logit_e > 0).float().mean())
+            sums["policy_acc"] += float((logit_p < 0).float().mean())
+            steps += 1
+        return {key: value / max(steps, 1) for key, value in sums.items()}

@@ -1,0 +1,106 @@
+"""``gail``: Generative Adversarial Imitation Learning (Ho & Ermon, NeurIPS 2016).
+
+https://arxiv.org/abs/1606.03476. A discriminator D(x) = σ(logit(x)) learns to tell expert
+transitions (label 1) from the policy's (label 0) with binary cross-entropy plus a gradient
+penalty; the policy is rewarded with r = −log(1 − D(x) + 1e-8), the form the QD-IL code
+uses. With ``use_measures`` it is the measure-conditioned GAIL of Eq. (GAIL) in the paper.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Literal
+
+import torch
+import torch.nn.functional as F
+from typing_extensions import override
+
+from qdil.data import TransitionBatch
+from qdil.rewards.adversarial import AdversarialReward
+from qdil.rewards.nets import gail_reward, gradient_penalty, mlp
+from qdil.rewards.registry import register_reward
+
+
+@register_reward("gail")
+class GAIL(AdversarialReward):
+    """GAIL: a transition discriminator; reward −log(1 − D).
+
+    Args:
+        obs_dim: observation size.
+        action_dim: action size.
+        num_measures: k.
+        hidden: discriminator widths (the paper: (100, 100)).
+        reward_type: ``log1-d`` (−log(1 − D), default), ``logd`` (log D) or ``logit``.
+        **kwargs: :class:`~qdil.rewards.adversarial.AdversarialReward` options.
+    """
+
+    description = "GAIL (Ho & Ermon 2016): discriminator reward -log(1-D)"
+
+    def __init__(
+        self,
+        obs_dim: int,
+        action_dim: int,
+        num_measures: int,
+        *,
+        hidden: Sequence[int] = (100, 100),
+        reward_type: Literal["log1-d", "logd", "logit"] = "log1-d",
+        use_measures: bool = False,
+        learning_rate: float = 3e-4,
+        batch_size: int = 200,
+        epochs: int = 1,
+        gp_weight: float = 10.0,
+    ) -> None:
+        super().__init__(
+            obs_dim,
+            action_dim,
+            num_measures,
+            use_measures=use_measures,
+            learning_rate=learning_rate,
+            batch_size=batch_size,
+            epochs=epochs,
+            gp_weight=gp_weight,
+        )
+        self.reward_type = reward_type
+        self.discriminator = mlp(self.input_dim, hidden, 1)
+
+    def logits(self, x: torch.Tensor) -> torch.Tensor:
+        """(B,) discriminator logits of inputs x (B, input_dim)."""
+        return self.discriminator(x).squeeze(-1)
+
+    @override
+    def configure_optimizers(self) -> torch.optim.Optimizer:
+        return torch.optim.Adam(self.parameters(), lr=self.learning_rate)
+
+    @override
+    def reward(self, batch: TransitionBatch) -> torch.Tensor:
+        logits = self.logits(self.features(batch))
+        if self.reward_type == "logit":
+            return logits
+        if self.reward_type == "logd":
+            return torch.log(torch.sigmoid(logits) + 1e-8)
+        return gail_reward(logits)
+
+    @override
+    def update(
+        self, expert: TransitionBatch, policy: TransitionBatch, iteration: int
+    ) -> dict[str, float]:
+        optimizer = self.optimizers()
+        sums = {"loss": 0.0, "gp": 0.0, "expert_acc": 0.0, "policy_acc": 0.0}
+        steps = 0
+        for expert_mb, policy_mb in self.minibatches(expert, policy):
+            x_e, x_p = self.features(expert_mb), self.features(policy_mb)
+            logit_e, logit_p = self.logits(x_e), self.logits(x_p)
+            loss = F.binary_cross_entropy_with_logits(logit_e, torch.ones_like(logit_e))
+            loss = loss + F.binary_cross_entropy_with_logits(logit_p, torch.zeros_like(logit_p))
+            gp = gradient_penalty(self.logits, x_e, x_p) if self.gp_weight else torch.zeros(())
+            loss = loss + self.gp_weight * gp
+            self.check_finite(loss.detach(), "discriminator loss", iteration)
+            optimizer.zero_grad()
+            self.manual_backward(loss)
+            optimizer.step()
+            sums["loss"] += float(loss.detach())
+            sums["gp"] += float(gp.detach())
+            sums["expert_acc"] += float((logit_e > 0).float().mean())
+            sums["policy_acc"] += float((logit_p < 0).float().mean())
+            steps += 1
+        return {key: value / max(steps, 1) for key, value in sums.items()}
