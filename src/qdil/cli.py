@@ -173,10 +173,18 @@ def fit(argv: list[str]) -> None:
     atomic_write(run_dir / CONFIG_NAME, lambda file: file.write(resolved.encode()))
     init = parser.instantiate(config)
     run = build_run(
-        name=name, run_dir=run_dir, seed=init.seed, env=init.env, rl=init.rl, reward=init.reward,
-        bonus=init.bonus, demos=init.demos, qd=init.qd, logging=init.logging,
+        name=name,
+        run_dir=run_dir,
+        seed=init.seed,
+        env=init.env,
+        rl=init.rl,
+        reward=init.reward,
+        bonus=init.bonus,
+        demos=init.demos,
+        qd=init.qd,
+        logging=init.logging,
         config=yaml.safe_load(resolved),
-    )  # fmt: skip
+    )
     if resume_dir is not None:
         load_checkpoint(run)
         run.tracker.csv.truncate(run.state.iteration)
@@ -198,7 +206,139 @@ def rewards(argv: list[str]) -> None:
         print(f"{entry.name:<{width}}  {entry.description}  [{entry.source}]")
 
 
-COMMANDS = {"fit": fit, "rewards": rewards}
+def demos(argv: list[str]) -> None:
+    """``qdil demos``: demonstrations from an expert run, their table, or an import."""
+    parser = argparse.ArgumentParser(
+        prog="qdil demos",
+        description="Make demonstrations from a run's true-return archive (the paper's "
+        "pipeline: top elites, farthest-point sampling in measure space, one deterministic "
+        "episode each), print a demonstration file's table, or import outside data.",
+    )
+    parser.add_argument("run_dir", nargs="?", help="an expert run directory")
+    parser.add_argument("--out", help="output .npz file")
+    parser.add_argument("--top", type=int, default=500, help="candidate pool: best elites")
+    parser.add_argument("--num", type=int, default=4, help="demonstrations to pick")
+    parser.add_argument("--seed", type=int, default=0, help="reset seed of the episodes")
+    parser.add_argument("--info", metavar="FILE", help="print the table of a demo file")
+    parser.add_argument(
+        "--import-npz",
+        metavar="FILE",
+        help="import D4RL-style arrays "
+        "(observations, actions, next_observations, optional rewards, "
+        "terminals, timeouts) from an .npz; contacts are replayed",
+    )
+    parser.add_argument("--import-minari", metavar="DATASET", help="import a local Minari dataset")
+    parser.add_argument("--task", help="task of imported data, e.g. Walker2d-v5")
+    args = parser.parse_args(argv)
+    from qdil.demos.io import demo_table, episode_summary, load_demos, save_demos
+
+    if args.info:
+        loaded = load_demos(args.info)
+        print(demo_table(loaded))
+        print("\n".join(episode_summary(loaded)))
+        provenance = loaded.metadata
+        if "run" in provenance:
+            print(
+                f"from {provenance['run']} (iteration {provenance.get('run_iteration')}, "
+                f"seed {provenance.get('run_seed')}), qdil {provenance.get('qdil_version')}"
+            )
+        return
+    if not args.out:
+        parser.error("--out is required to write demonstrations")
+    if args.import_npz or args.import_minari:
+        from qdil.demos.importing import import_minari, import_npz
+
+        if args.import_minari:
+            made = import_minari(args.import_minari, task=args.task)
+        else:
+            if not args.task:
+                parser.error("--task is required with --import-npz")
+            made = import_npz(args.import_npz, args.task)
+        save_demos(made, args.out)
+    else:
+        if not args.run_dir:
+            parser.error("give a run directory (or --info FILE / --import-npz FILE)")
+        from qdil.demos.generate import demos_from_run
+
+        made, qpos, qvel = demos_from_run(args.run_dir, top=args.top, num=args.num, seed=args.seed)
+        save_demos(made, args.out, qpos, qvel)
+    print(demo_table(made))
+    print(f"wrote {args.out}")
+
+
+def evaluate(argv: list[str]) -> None:
+    """``qdil eval``: re-score a run's archive with deterministic episodes on the true reward."""
+    parser = argparse.ArgumentParser(
+        prog="qdil eval",
+        description="Re-evaluate every elite of a run's true-return archive with deterministic "
+        "actions; writes corrected_archive.pkl and eval.json into the run directory.",
+    )
+    parser.add_argument("run_dir")
+    parser.add_argument("--episodes", type=int, default=5, help="episodes per elite (PPGA: 50)")
+    parser.add_argument("--batch", type=int, default=64, help="elites evaluated together")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--num-threads", type=int, default=None, help="physics threads")
+    args = parser.parse_args(argv)
+    from qdil.evaluation.rescore import rescore_archive
+
+    _, summary = rescore_archive(
+        args.run_dir, args.episodes, args.batch, args.seed, args.num_threads, progress=True
+    )
+    before, after = summary["training_metrics"], summary["metrics"]
+    print(
+        f"{summary['elites_evaluated']} elites x {args.episodes} deterministic episodes "
+        f"({summary['env_steps']:,} env steps)"
+    )
+    print("| metric | training archive | corrected |\n|---|---|---|")
+    for key in ("qd_score", "qd_score_offset", "coverage", "obj_max", "obj_mean", "num_elites"):
+        print(f"| {key} | {before[key]:.6g} | {after[key]:.6g} |")
+
+
+def report(argv: list[str]) -> None:
+    """``qdil report``: the paper's tables, Tukey HSD tests, heatmaps and learning curves."""
+    parser = argparse.ArgumentParser(
+        prog="qdil report",
+        description="Paper-style report of run directories: main table (mean ± std over "
+        "seeds), Tukey HSD on the QD-Score, archive heatmaps, learning curves. Runs that are "
+        "missing or unfinished are listed, not dropped.",
+    )
+    parser.add_argument("paths", nargs="+", metavar="RUN_DIR", help="runs or folders of runs")
+    parser.add_argument("--out", required=True, help="output folder of the report")
+    parser.add_argument(
+        "--label",
+        action="append",
+        default=[],
+        metavar="RUN_DIR=LABEL",
+        help="method label of one run (repeatable); default: reward model [+ -Bonus]",
+    )
+    parser.add_argument(
+        "--reference",
+        metavar="METHOD",
+        help="Tukey table: only pairs with this method, as group2 (the paper's layout)",
+    )
+    args = parser.parse_args(argv)
+    labels = {}
+    for item in args.label:
+        path, sep, label = item.rpartition("=")
+        if not sep or not path or not label:
+            parser.error(f"--label takes RUN_DIR=LABEL, got {item!r}")
+        labels[path] = label
+    from qdil.evaluation.report import write_report
+
+    made = write_report(args.paths, args.out, labels=labels, reference=args.reference)
+    left_out = [run for run in made.runs if not run.included]
+    unfinished = [run for run in made.runs if run.included and run.unfinished]
+    print(made.main_table or "no run could be included")
+    print(
+        f"\n{len(made.runs) - len(left_out)} run(s) included ({len(unfinished)} unfinished), "
+        f"{len(left_out)} left out"
+    )
+    for run in [run for run in made.runs if run.problems or run.notes]:
+        print(f"  {run.path}: {run.status}: {'; '.join(run.problems + run.notes)}")
+    print(f"report: {Path(args.out) / 'report.md'} (also report.html, tables, figures)")
+
+
+COMMANDS = {"fit": fit, "rewards": rewards, "demos": demos, "eval": evaluate, "report": report}
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -7,7 +7,9 @@ import matplotlib
 matplotlib.use("Agg")
 
 import matplotlib.pyplot as plt
+import numpy as np
 from matplotlib.figure import Figure
+from matplotlib.ticker import MaxNLocator
 from ribs.archives import GridArchive
 
 
@@ -38,5 +40,34 @@ def archive_heatmap(
     if archive.measure_dim > 1:
         ax.set_ylabel("foot 2 contact fraction")
     ax.set_title(title, fontsize=9)
+    figure.tight_layout()
+    return figure
+
+
+def learning_curves(
+    curves: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray, int]],
+    title: str = "",
+    ylabel: str = "",
+) -> Figure:
+    """Mean over seeds with a shaded ±std band, one line per method.
+
+    Args:
+        curves: method -> ``(iterations, mean, std, n_seeds)``; the arrays have shape
+            ``(T_method,)`` (see :func:`qdil.evaluation.stats.align_curves`).
+        title: axes title.
+        ylabel: y-axis label.
+    """
+    figure, ax = plt.subplots(figsize=(5.5, 3.8))
+    for method, (steps, mean, std, n) in curves.items():
+        (line,) = ax.plot(steps, mean, label=f"{method} (n={n})", linewidth=1.5)
+        if n > 1:
+            ax.fill_between(steps, mean - std, mean + std, color=line.get_color(), alpha=0.2)
+    ax.set_xlabel("iteration")
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+    ax.set_ylabel(ylabel)
+    ax.set_title(title, fontsize=9)
+    ax.grid(alpha=0.3)
+    if curves:
+        ax.legend(fontsize=7)
     figure.tight_layout()
     return figure

@@ -1,0 +1,130 @@
+"""``qdil eval``: re-score every elite on the true reward (PPGA's corrected metrics, D12).
+
+Branches are scored during training on a few stochastic episodes, so archive objectives
+are noisy. The corrected archive re-plays every elite of the true-return archive for
+``episodes`` deterministic episodes (mean actions, the elite's own observation statistics)
+and inserts it at its re-measured cell into a fresh archive; when two elites land in one
+cell the better one stays.
+
+Cost: elites × episodes × mean episode length env steps; for a 50×50 Walker2d archive
+with 1,000 elites of 1,000-step episodes and 5 episodes each that is 5 M steps, about
+8 minutes at 10 k env-steps/s on 2 cores.
+"""
+
+from __future__ import annotations
+
+import json
+import pickle
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+import yaml
+from ribs.archives import GridArchive
+
+from qdil.envs.vector import LocomotionVectorEnv
+from qdil.qd.archives import QD_OFFSETS, elite_fields, make_grid, qd_metrics
+from qdil.qd.checkpoint import atomic_write, load_archive
+from qdil.rl.collect import evaluate_policies
+from qdil.rl.networks import VectorizedActor
+from qdil.rl.normalize import RunningMeanStd
+
+CORRECTED = "corrected_archive.pkl"
+EVAL_JSON = "eval.json"
+
+
+def rescore_archive(
+    run_dir: str | Path,
+    episodes: int = 5,
+    batch: int = 64,
+    seed: int = 0,
+    num_threads: int | None = None,
+    progress: bool = False,
+) -> tuple[GridArchive, dict[str, Any]]:
+    """Re-evaluate every elite of a run's true-return archive.
+
+    Args:
+        run_dir: the run directory.
+        episodes: deterministic episodes per elite (PPGA: 50).
+        batch: elites evaluated together.
+        seed: reset seed.
+        num_threads: physics threads (``None``: every core).
+        progress: show a progress bar.
+
+    Returns:
+        The corrected archive and a summary with its metrics.
+    """
+    run_dir = Path(run_dir)
+    config = yaml.safe_load((run_dir / "config.yaml").read_text())
+    archive, iteration = load_archive(run_dir, "true")
+    elites = archive.data()
+    env_cfg = config["env"]
+    rl = (config.get("rl") or {}).get("init_args") or {}
+    hidden = tuple(rl.get("actor_hidden", (128, 128)))
+    obs_clip = float(rl.get("obs_clip", 10.0))
+    count = len(elites["objective"])
+    width = min(batch, max(count, 1))
+    env = LocomotionVectorEnv(
+        env_cfg["task"],
+        width * episodes,
+        max_episode_steps=int(env_cfg.get("max_episode_steps", 1000)),
+        autoreset_mode="Disabled",
+        num_threads=num_threads,
+        **(env_cfg.get("task_kwargs") or {}),
+    )
+    obs_dim = env.single_observation_space.shape[0]
+    action_dim = env.single_action_space.shape[0]
+    objective, measures, lengths = np.zeros(count), np.zeros((count, env.num_feet)), np.zeros(count)
+    steps = 0
+    from tqdm.auto import tqdm
+
+    for start in tqdm(
+        range(0, count, width), disable=not progress, desc="re-evaluating", unit="batch"
+    ):
+        rows = np.arange(start, min(start + width, count))
+        actor = VectorizedActor(len(rows), obs_dim, action_dim, hidden)
+        actor.set_solutions(elites["solution"][rows])
+        stats = RunningMeanStd.__new__(RunningMeanStd)
+        stats.mean = torch.as_tensor(elites["obs_mean"][rows])
+        stats.var = torch.as_tensor(elites["obs_var"][rows])
+        stats.count = torch.as_tensor(elites["obs_count"][rows])
+        result = evaluate_policies(env, actor, stats, episodes, seed + start, None, True, obs_clip)
+        objective[rows], measures[rows], lengths[rows] = (
+            result.true_objective,
+            result.measures,
+            result.lengths,
+        )
+        steps += result.env_steps
+    corrected = make_grid(
+        solution_dim=archive.solution_dim,
+        cells=list(archive.dims),
+        extra_fields=elite_fields(obs_dim),
+    )
+    if count:
+        corrected.add(
+            elites["solution"],
+            objective,
+            measures,
+            obs_mean=elites["obs_mean"],
+            obs_var=elites["obs_var"],
+            obs_count=elites["obs_count"],
+            length=lengths,
+        )
+    metrics = qd_metrics(corrected, QD_OFFSETS.get(env_cfg["task"], 0.0))
+    summary = {
+        "run": str(run_dir),
+        "task": env_cfg["task"],
+        "iteration": iteration,
+        "episodes_per_elite": episodes,
+        "deterministic": True,
+        "elites_evaluated": count,
+        "env_steps": steps,
+        "metrics": metrics,
+        "training_metrics": qd_metrics(archive, QD_OFFSETS.get(env_cfg["task"], 0.0)),
+    }
+    atomic_write(
+        run_dir / CORRECTED, lambda f: pickle.dump(corrected, f, protocol=pickle.HIGHEST_PROTOCOL)
+    )
+    atomic_write(run_dir / EVAL_JSON, lambda f: f.write(json.dumps(summary, indent=1).encode()))
+    return corrected, summary

@@ -1,0 +1,366 @@
+"""Run directories as ``qdil report`` sees them: discovery, method labels, final archives.
+
+Which runs go in:
+
+- A given path is a run directory if it holds ``config.yaml``; otherwise every directory
+  directly inside it that holds ``config.yaml`` is a run. A path that is neither is listed as
+  left out.
+- A run is **left out** when its ``config.yaml`` is unreadable or names no ``env.task``,
+  when it has no ``metrics.csv`` (or the file has no rows), or when it has no readable
+  checkpoint (``checkpoints/last.pt``). Left-out runs are listed with the reason; they are
+  never dropped silently.
+- A run is **unfinished** when its last logged iteration or its checkpoint's iteration is
+  below ``qd.iterations``. Unfinished runs that have a checkpoint are still included, at
+  the iteration of their checkpoint, and flagged.
+
+Which numbers: a run's final metrics come from the corrected archive of ``qdil eval``
+(``eval.json`` and ``corrected_archive.pkl``, decision D12) when it exists and was made from
+the run's current checkpoint, otherwise from the training true-return archive of the
+checkpoint; :attr:`RunResult.source` says which. Learning curves come from ``metrics.csv``.
+"""
+
+from __future__ import annotations
+
+import csv
+import importlib
+import json
+import math
+import pickle
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+from ribs.archives import GridArchive
+
+from qdil.evaluation.rescore import CORRECTED, EVAL_JSON
+from qdil.qd.archives import QD_OFFSETS, qd_metrics
+
+CONFIG_NAME = "config.yaml"
+METRICS_NAME = "metrics.csv"
+
+DISPLAY_NAMES: dict[str, str] = {
+    "true_reward": "PPGA-trueReward",
+    "gail": "GAIL",
+    "airl": "AIRL",
+    "pwil": "PWIL",
+    "maxentirl": "MaxEntIRL",
+    "giril": "GIRIL",
+    "wae_gail": "WAE-GAIL",
+    "wae_wgail": "WAE-WGAIL",
+    "mcwae_wgail": "mCWAE-WGAIL",
+    "mcwae_gail": "mCWAE-GAIL",
+    "vail": "VAIL",
+}
+"""Registry names of reward models -> the names the paper's tables use."""
+
+TASK_ORDER = ("HalfCheetah-v5", "Walker2d-v5", "Humanoid-v5")
+"""The paper's column order; other tasks follow, sorted."""
+
+
+@dataclass
+class RunResult:
+    """One run directory as the report sees it.
+
+    Attributes:
+        path: the run directory.
+        task: ``env.task`` of its config (``None`` if unreadable).
+        method: the method label (see :func:`method_label`).
+        seed: the recipe's seed.
+        target: ``qd.iterations`` of the recipe.
+        last_logged: last iteration in ``metrics.csv``.
+        iteration: iteration of the checkpoint the final archive comes from.
+        source: where the final metrics come from (corrected archive or training archive).
+        metrics: final metrics, keys of :func:`qdil.qd.archives.qd_metrics`.
+        archive: a light copy of the final archive (objectives and measures only).
+        curves: ``metrics.csv`` column -> ``(iterations, values)``, each of shape ``(T,)``.
+        problems: why the run is left out (empty if it is included).
+        notes: remarks on an included run (unfinished, stale ``eval.json``, ...).
+    """
+
+    path: Path
+    task: str | None = None
+    method: str | None = None
+    seed: int | None = None
+    target: int | None = None
+    last_logged: int | None = None
+    iteration: int | None = None
+    source: str = ""
+    metrics: dict[str, float] = field(default_factory=dict)
+    archive: GridArchive | None = None
+    curves: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
+    problems: list[str] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def included(self) -> bool:
+        """Whether the run goes into tables and figures."""
+        return not self.problems
+
+    @property
+    def unfinished(self) -> bool:
+        """Whether the run stopped before ``qd.iterations`` (logged or checkpointed)."""
+        if self.target is None:
+            return False
+        reached = [i for i in (self.last_logged, self.iteration) if i is not None]
+        return bool(reached) and min(reached) < self.target
+
+    @property
+    def status(self) -> str:
+        """``included``, ``included, unfinished`` or ``left out``."""
+        if not self.included:
+            return "left out"
+        return "included, unfinished" if self.unfinished else "included"
+
+
+Groups = dict[str, dict[str, list[RunResult]]]
+"""task -> method -> included runs."""
+
+
+def find_runs(paths: Iterable[str | Path]) -> tuple[list[Path], list[RunResult]]:
+    """Run directories under the given paths (each a run, or a folder of runs one level down).
+
+    Args:
+        paths: run directories or folders that contain run directories.
+
+    Returns:
+        The run directories (in order, without duplicates) and a left-out entry for every
+        path that is neither.
+    """
+    runs: list[Path] = []
+    missing: list[RunResult] = []
+    for raw in paths:
+        path = Path(raw)
+        if (path / CONFIG_NAME).is_file():
+            found = [path]
+        elif path.is_dir():
+            found = sorted(p for p in path.iterdir() if (p / CONFIG_NAME).is_file())
+        else:
+            found = []
+        if not found:
+            reason = f"no {CONFIG_NAME} in it or in its sub-directories"
+            reason = reason if path.exists() else "it does not exist"
+            missing.append(RunResult(path=path, problems=[f"not a run directory: {reason}"]))
+        for run in found:
+            if run.resolve() not in {r.resolve() for r in runs}:
+                runs.append(run)
+    return runs, missing
+
+
+def reward_name(config: Mapping[str, Any]) -> str:
+    """The reward model's registry name, or the last component of its class path.
+
+    Args:
+        config: a resolved recipe (``config.yaml``).
+    """
+    reward = config.get("reward")
+    class_path = reward.get("class_path", "") if isinstance(reward, Mapping) else str(reward)
+    if "." not in class_path:
+        return class_path
+    from qdil.rewards import discover
+
+    discover()
+    module, _, qualname = class_path.rpartition(".")
+    try:
+        cls = getattr(importlib.import_module(module), qualname)
+        return getattr(cls, "name", "") or qualname
+    except Exception:  # a plugin that is not installed here: fall back to the class name
+        return qualname
+
+
+def method_label(config: Mapping[str, Any]) -> str:
+    """The paper's name of a run's method: reward model plus ``-Bonus`` if the bonus is on.
+
+    Registry names map through :data:`DISPLAY_NAMES` (``mcwae_wgail`` -> ``mCWAE-WGAIL``);
+    unknown names stay as they are.
+
+    Args:
+        config: a resolved recipe (``config.yaml``).
+    """
+    name = reward_name(config)
+    label = DISPLAY_NAMES.get(name, DISPLAY_NAMES.get(name.lower(), name))
+    bonus = config.get("bonus") or {}
+    if isinstance(bonus, Mapping) and bonus.get("enabled"):
+        label += "-Bonus"
+    return label
+
+
+def read_curves(path: Path) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Columns of ``metrics.csv`` against iteration; a repeated iteration keeps its last row.
+
+    Args:
+        path: the ``metrics.csv`` file.
+
+    Returns:
+        Column -> ``(iterations, values)``, shapes ``(T,)``; missing cells are NaN.
+    """
+    with open(path, newline="") as file:
+        rows = list(csv.DictReader(file))
+    by_iteration = {int(float(row["iteration"])): row for row in rows if row.get("iteration")}
+    steps = np.array(sorted(by_iteration), dtype=np.int64)
+    curves = {}
+    for key in rows[0].keys() if rows else []:
+        if key == "iteration":
+            continue
+        values = [_float(by_iteration[int(s)].get(key)) for s in steps]
+        curves[key] = (steps, np.array(values, dtype=np.float64))
+    return curves
+
+
+def _float(value: str | None) -> float:
+    try:
+        return float(value) if value not in (None, "") else math.nan
+    except ValueError:
+        return math.nan
+
+
+def light_copy(archive: GridArchive) -> GridArchive:
+    """The objectives and measures of an archive in a GridArchive without policies.
+
+    Args:
+        archive: a GridArchive (policies of tens of thousands of parameters per elite).
+
+    Returns:
+        An archive with the same grid and elites and ``solution_dim`` 1.
+    """
+    light = GridArchive(
+        solution_dim=1,
+        dims=list(archive.dims),
+        ranges=list(zip(archive.lower_bounds, archive.upper_bounds, strict=True)),
+    )
+    data = archive.data(["objective", "measures"])
+    if len(data["objective"]):
+        light.add(np.zeros((len(data["objective"]), 1)), data["objective"], data["measures"])
+    return light
+
+
+def _final_archive(run: RunResult) -> None:
+    """Fill ``run``'s final archive, metrics and source (corrected archive preferred)."""
+    from qdil.qd.checkpoint import CheckpointError, load_archive
+
+    try:
+        archive, run.iteration = load_archive(run.path, "true")
+    except CheckpointError as error:
+        run.problems.append(f"no readable checkpoint ({error})")
+        return
+    offset = QD_OFFSETS.get(run.task or "", 0.0)
+    run.metrics = qd_metrics(archive, offset)
+    run.source = f"training archive (checkpoint, iteration {run.iteration})"
+    eval_path, corrected_path = run.path / EVAL_JSON, run.path / CORRECTED
+    if not eval_path.exists():
+        run.archive = light_copy(archive)
+        return
+    try:
+        summary = json.loads(eval_path.read_text())
+        metrics = {key: float(value) for key, value in summary["metrics"].items()}
+    except (ValueError, KeyError, TypeError) as error:
+        run.notes.append(f"{EVAL_JSON} unreadable ({error}); training archive used")
+        run.archive = light_copy(archive)
+        return
+    if summary.get("iteration") != run.iteration:
+        run.notes.append(
+            f"{EVAL_JSON} is from iteration {summary.get('iteration')}, the checkpoint from "
+            f"{run.iteration}; training archive used (run `qdil eval` again)"
+        )
+        run.archive = light_copy(archive)
+        return
+    run.metrics = metrics
+    episodes = summary.get("episodes_per_elite", "?")
+    run.source = f"corrected (qdil eval, {episodes} episodes/elite, iteration {run.iteration})"
+    if corrected_path.exists():
+        with open(corrected_path, "rb") as file:
+            archive = pickle.load(file)  # our own file, written by qdil eval
+    else:
+        run.notes.append(f"no {CORRECTED}: heatmap shows the training archive")
+    run.archive = light_copy(archive)
+
+
+def load_run(path: Path, label: str | None = None) -> RunResult:
+    """Read one run directory: config, learning curves, final archive and metrics.
+
+    Args:
+        path: the run directory.
+        label: method label overriding :func:`method_label`.
+
+    Returns:
+        The run; ``problems`` says why it is left out, ``notes`` what to know about it.
+    """
+    run = RunResult(path=path)
+    try:
+        config = yaml.safe_load((path / CONFIG_NAME).read_text()) or {}
+        run.task = config["env"]["task"]
+    except (OSError, yaml.YAMLError, KeyError, TypeError) as error:
+        run.problems.append(f"{CONFIG_NAME} unreadable or without env.task ({error!r})")
+        return run
+    run.method = label or method_label(config)
+    run.seed = config.get("seed")
+    run.target = (config.get("qd") or {}).get("iterations")
+    metrics_path = path / METRICS_NAME
+    if metrics_path.exists():
+        run.curves = read_curves(metrics_path)
+    if not run.curves:
+        run.problems.append(
+            f"no {METRICS_NAME}" if not metrics_path.exists() else f"{METRICS_NAME} has no rows"
+        )
+    else:
+        steps = next(iter(run.curves.values()))[0]
+        run.last_logged = int(steps[-1]) if len(steps) else None
+    _final_archive(run)
+    if run.included and run.unfinished:
+        run.notes.insert(
+            0,
+            f"unfinished: {run.last_logged} iterations logged, checkpoint at "
+            f"{run.iteration}, recipe asks for {run.target}",
+        )
+    return run
+
+
+def group_runs(runs: Iterable[RunResult]) -> Groups:
+    """Included runs by task (paper order) and method (true reward first, then by name)."""
+    groups: Groups = {}
+    for run in runs:
+        if run.included:
+            groups.setdefault(run.task, {}).setdefault(run.method, []).append(run)
+    tasks = sorted(groups, key=lambda t: (TASK_ORDER.index(t) if t in TASK_ORDER else 99, t))
+    first = DISPLAY_NAMES["true_reward"]
+    return {
+        task: {
+            method: sorted(groups[task][method], key=lambda r: (r.seed is None, r.seed, r.path))
+            for method in sorted(groups[task], key=lambda m: (not m.startswith(first), m.lower()))
+        }
+        for task in tasks
+    }
+
+
+def flag_duplicate_seeds(groups: Groups) -> None:
+    """Add a note to every run that shares its seed with another run of its task and method."""
+    for task, runs_by_method in groups.items():
+        for method, runs in runs_by_method.items():
+            for run in runs:
+                twins = [str(r.path) for r in runs if r is not run and r.seed == run.seed]
+                if twins:
+                    run.notes.append(
+                        f"seed {run.seed} also used by {', '.join(twins)} ({task} / {method})"
+                    )
+
+
+def collect_runs(
+    paths: Iterable[str | Path], labels: Mapping[str | Path, str] | None = None
+) -> list[RunResult]:
+    """Find and read every run under ``paths``; left-out runs are kept, with their reasons.
+
+    Args:
+        paths: run directories, or folders whose direct sub-directories are runs.
+        labels: run directory -> method label, overriding :func:`method_label`.
+
+    Returns:
+        The runs in the order found, then the paths that are not runs.
+    """
+    overrides = {Path(p).resolve(): label for p, label in (labels or {}).items()}
+    run_dirs, missing = find_runs(paths)
+    runs = [load_run(p, overrides.get(p.resolve())) for p in run_dirs] + missing
+    unused = sorted(set(overrides) - {p.resolve() for p in run_dirs})
+    runs += [RunResult(path=p, problems=["given with --label but not a run found"]) for p in unused]
+    return runs

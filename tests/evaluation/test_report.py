@@ -1,0 +1,388 @@
+"""``qdil report``: statistics by hand, and a report of real smoke runs through the CLI."""
+
+from __future__ import annotations
+
+import contextlib
+import csv
+import io
+import json
+import os
+import shutil
+import statistics
+import subprocess
+import sys
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+import yaml
+from ribs.archives import GridArchive
+from scipy.stats import tukey_hsd
+
+from qdil.evaluation import document as doc
+from qdil.evaluation.report import colour_range, format_pvalue, main_table, tukey_tests
+from qdil.evaluation.runs import (
+    RunResult,
+    collect_runs,
+    find_runs,
+    flag_duplicate_seeds,
+    group_runs,
+    method_label,
+)
+from qdil.evaluation.stats import Summary, align_curves, format_mean_std, summarize, tukey
+
+ROOT = Path(__file__).resolve().parents[2]
+SMOKE = ROOT / "recipes" / "smoke" / "walker_true.yaml"
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+
+
+# --- statistics with hand-made numbers -------------------------------------------------------
+
+
+def test_summarize_uses_the_sample_std() -> None:
+    values = [1.0, 2.0, 3.0, 4.0]
+    summary = summarize(values)
+    assert summary.mean == pytest.approx(2.5)
+    assert summary.std == pytest.approx(statistics.stdev(values))  # ddof=1: 1.2910
+    assert summary.std != pytest.approx(statistics.pstdev(values))  # not ddof=0: 1.1180
+    assert summary.n == 4
+
+
+def test_single_seed_says_so() -> None:
+    summary = summarize([3.8e6])
+    assert summary == Summary(3.8e6, 0.0, 1)
+    assert format_mean_std(summary, "sci") == "3.80e+06 ±0 (n=1)"
+    assert format_mean_std(summarize([]), "sci") == "–"
+
+
+@pytest.mark.parametrize(
+    ("summary", "style", "text"),
+    [
+        (Summary(3.8e6, 2.85e5, 5), "sci", "3.80e+06 ± 2.85e+05"),
+        (Summary(98.284, 0.4166, 3), "fixed", "98.28 ± 0.42"),
+        (Summary(4553.2, 547.4, 3), "int", "4,553 ± 547"),
+        (Summary(float("nan"), float("nan"), 2), "int", "nan ± nan"),
+    ],
+)
+def test_mean_std_formatting(summary: Summary, style: str, text: str) -> None:
+    assert format_mean_std(summary, style) == text
+
+
+GROUPS = {
+    "mCWAE-WGAIL-Bonus": [3.1, 3.0, 3.2, 2.9, 3.05],
+    "GAIL": [2.0, 2.6, 2.2, 2.4, 1.9],
+    "AIRL": [2.9, 3.3, 2.5, 2.7, 3.1],
+}
+
+
+def test_tukey_pvalues_equal_scipy_on_the_same_arrays() -> None:
+    result = tukey(GROUPS)
+    names = sorted(GROUPS)  # AIRL, GAIL, mCWAE-WGAIL-Bonus
+    expected = tukey_hsd(*[np.array(GROUPS[name]) for name in names]).pvalue
+    assert len(result.comparisons) == 3 and not result.notes
+    for c in result.comparisons:
+        i, j = names.index(c.group1), names.index(c.group2)
+        assert i < j
+        assert c.pvalue == pytest.approx(expected[i, j], rel=1e-12)
+        assert c.diff == pytest.approx(np.mean(GROUPS[c.group2]) - np.mean(GROUPS[c.group1]))
+        assert c.sign == ("+" if c.diff > 0 else "-")
+    gail = next(
+        c for c in result.comparisons if c.group2 == "mCWAE-WGAIL-Bonus" and c.group1 == "GAIL"
+    )
+    assert gail.sign == "+" and gail.significant and gail.pvalue < 0.001
+
+
+def test_tukey_leaves_out_single_seeds_and_skips_with_one_method() -> None:
+    result = tukey({**GROUPS, "PWIL": [2.0]})
+    assert {c.group1 for c in result.comparisons} | {c.group2 for c in result.comparisons} == set(
+        GROUPS
+    )
+    assert any("PWIL" in note and "1 seed" in note for note in result.notes)
+    skipped = tukey({"GAIL": [1.0, 2.0], "PWIL": [2.0]})
+    assert skipped.comparisons == []
+    assert any("skipped" in note for note in skipped.notes)
+
+
+def fake_run(task: str, method: str, qd_score: float, seed: int = 0) -> RunResult:
+    return RunResult(
+        path=Path(f"{method}-{seed}"),
+        task=task,
+        method=method,
+        seed=seed,
+        metrics={
+            "qd_score": qd_score,
+            "qd_score_offset": qd_score + 10,
+            "coverage": 0.5,
+            "obj_max": 100.0,
+            "obj_mean": 50.0,
+        },
+    )
+
+
+def test_reference_orients_pairs_as_group2() -> None:
+    runs = [fake_run("T", m, v, s) for m, vs in GROUPS.items() for s, v in enumerate(vs)]
+    plain = tukey_tests(group_runs(runs))["T"].comparisons
+    oriented = tukey_tests(group_runs(runs), reference="AIRL")["T"].comparisons
+    assert len(oriented) == 2 and all(c.group2 == "AIRL" for c in oriented)
+    for c in oriented:
+        twin = next(p for p in plain if {p.group1, p.group2} == {c.group1, c.group2})
+        assert c.pvalue == twin.pvalue and c.diff == pytest.approx(-twin.diff)
+        assert c.diff == pytest.approx(np.mean(GROUPS["AIRL"]) - np.mean(GROUPS[c.group1]))
+
+
+def test_main_table_rows_and_single_seed_cells() -> None:
+    runs = [fake_run("Walker2d-v5", "GAIL", 1e6, 0), fake_run("Walker2d-v5", "GAIL", 3e6, 1)]
+    runs += [fake_run("Walker2d-v5", "PPGA-trueReward", 5e6), fake_run("Hopper-v5", "GAIL", 2e6)]
+    header, rows = main_table(group_runs(runs))
+    assert header[:3] == ["Method", "Walker2d n", "Walker2d QD-Score"]
+    assert header[6:8] == ["Hopper n", "Hopper QD-Score"]
+    assert [row[0] for row in rows] == ["PPGA-trueReward", "GAIL"]  # true reward first
+    gail = rows[1]
+    assert gail[1] == "2" and gail[2] == f"2.00e+06 ± {statistics.stdev([1e6, 3e6]):.2e}"
+    assert gail[3] == "50.00 ± 0.00"
+    assert gail[7] == "2.00e+06 ±0 (n=1)"
+    assert rows[0][6] == "–"  # no true-reward run on Hopper
+
+
+def test_duplicate_seeds_are_flagged() -> None:
+    runs = [
+        fake_run("T", "GAIL", 1.0, 0),
+        fake_run("T", "GAIL", 2.0, 1),
+        fake_run("T", "AIRL", 1, 0),
+    ]
+    runs[1].seed = 0
+    flag_duplicate_seeds(group_runs(runs))
+    assert "seed 0 also used by GAIL-1" in runs[0].notes[0]
+    assert "seed 0 also used by GAIL-0" in runs[1].notes[0]
+    assert runs[2].notes == []
+
+
+def test_align_curves_keeps_the_iterations_every_seed_has() -> None:
+    long = (np.array([1, 2, 3, 4, 5]), np.array([1.0, 2.0, 3.0, 4.0, 5.0]))
+    short = (np.array([1, 2, 3]), np.array([3.0, 2.0, 7.0]))
+    steps, mean, std = align_curves([long, short])
+    np.testing.assert_array_equal(steps, [1, 2, 3])
+    np.testing.assert_allclose(mean, [2.0, 2.0, 5.0])
+    np.testing.assert_allclose(std, [statistics.stdev([1, 3]), 0.0, statistics.stdev([3, 7])])
+    steps, mean, std = align_curves([short])
+    np.testing.assert_array_equal(std, [0.0, 0.0, 0.0])
+
+
+def test_pvalue_bold_at_and_below_alpha() -> None:
+    assert format_pvalue(0.05) == "**0.0500**"
+    assert format_pvalue(0.0501) == "0.0501"
+    assert format_pvalue(1e-7) == "**<0.0001**"
+
+
+@pytest.mark.parametrize(
+    ("config", "label"),
+    [
+        ({"reward": {"class_path": "qdil.rewards.builtin.TrueReward"}}, "PPGA-trueReward"),
+        (
+            {"reward": {"class_path": "not.installed.AIRL"}, "bonus": {"enabled": True}},
+            "AIRL-Bonus",
+        ),
+        (
+            {"reward": {"class_path": "plug.mcwae_wgail"}, "bonus": {"enabled": False}},
+            "mCWAE-WGAIL",
+        ),
+        ({"reward": {"class_path": "plug.MyReward"}, "bonus": {"enabled": True}}, "MyReward-Bonus"),
+        ({"reward": "gail"}, "GAIL"),
+    ],
+)
+def test_method_labels(config: dict, label: str) -> None:
+    assert method_label(config) == label
+
+
+def test_colour_range_spans_every_archive() -> None:
+    archives = []
+    for objectives in ([1.0, -4.0], [9.0]):
+        archive = GridArchive(solution_dim=1, dims=[4, 4], ranges=[(0, 1), (0, 1)])
+        measures = np.linspace(0.1, 0.9, 2 * len(objectives)).reshape(-1, 2)
+        archive.add(np.zeros((len(objectives), 1)), np.array(objectives), measures)
+        archives.append(archive)
+    empty = GridArchive(solution_dim=1, dims=[4, 4], ranges=[(0, 1), (0, 1)])
+    assert colour_range([*archives, empty, None]) == (-4.0, 9.0)
+    assert colour_range([empty]) == (None, None)
+
+
+def test_html_converts_bold_code_and_images() -> None:
+    blocks = [doc.table(["a"], [["**0.01** `x` ![h](heatmaps/a.png) <b>"]])]
+    page = doc.to_html(blocks, "t")
+    assert '<b>0.01</b> <code>x</code> <img src="heatmaps/a.png" alt="h"> &lt;b&gt;' in page
+
+
+def test_find_runs_one_level_down(tmp_path: Path) -> None:
+    (tmp_path / "runs" / "a").mkdir(parents=True)
+    (tmp_path / "runs" / "a" / "config.yaml").write_text("seed: 0\n")
+    (tmp_path / "runs" / "notes").mkdir()
+    (tmp_path / "empty").mkdir()
+    found, missing = find_runs([tmp_path / "runs", tmp_path / "runs" / "a", tmp_path / "empty"])
+    assert found == [tmp_path / "runs" / "a"]
+    assert [m.path for m in missing] == [tmp_path / "empty"]
+    assert "not a run directory" in missing[0].problems[0]
+
+
+# --- real runs through the CLI ---------------------------------------------------------------
+
+
+def qdil_fit(*args: str, cwd: Path) -> None:
+    env = {**os.environ, "WANDB_MODE": "disabled", "QDIL_PLUGIN_PATH": str(cwd / "no-plugins")}
+    subprocess.run(
+        [sys.executable, "-m", "qdil.cli", "fit", str(SMOKE), *args],
+        cwd=cwd,
+        env=env,
+        check=True,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+
+
+def copy_run(source: Path, target: Path, **changes: dict) -> Path:
+    shutil.copytree(source, target)
+    config = yaml.safe_load((target / "config.yaml").read_text())
+    for section, values in changes.items():
+        config[section] = {**(config.get(section) or {}), **values}
+    (target / "config.yaml").write_text(yaml.safe_dump(config))
+    return target
+
+
+def read_csv(path: Path) -> list[dict[str, str]]:
+    with open(path, newline="") as file:
+        return list(csv.DictReader(file))
+
+
+@pytest.fixture(scope="module")
+def made(tmp_path_factory: pytest.TempPathFactory) -> SimpleNamespace:
+    """Three true-reward smoke runs, faked copies as other methods, a broken and a lost run."""
+    from qdil.cli import main
+    from qdil.evaluation.rescore import rescore_archive
+
+    root = tmp_path_factory.mktemp("report")
+    for seed in range(3):
+        qdil_fit("--name", f"true{seed}", "--seed", str(seed), cwd=root)
+    runs = root / "runs"
+    airl = {"class_path": "not.installed.AIRL"}
+    for seed in range(3):  # the same archives, relabelled; two of them re-scored
+        copy_run(runs / f"true{seed}", runs / f"airl{seed}", reward=airl, bonus={"enabled": True})
+    for seed in range(2):
+        rescore_archive(runs / f"airl{seed}", episodes=1, num_threads=1)
+    copy_run(
+        runs / "true0", runs / "giril0", reward={"class_path": "x.GIRIL"}, qd={"iterations": 10}
+    )
+    (runs / "broken").mkdir()
+    shutil.copy(runs / "true0" / "config.yaml", runs / "broken" / "config.yaml")
+    out = root / "report"
+    stdout = io.StringIO()
+    ghost = root / "ghost"
+    args = ["report", str(runs), str(root / "lost"), "--out", str(out), "--label", f"{ghost}=G"]
+    with contextlib.redirect_stdout(stdout):
+        main(args)
+    return SimpleNamespace(root=root, runs=runs, out=out, stdout=stdout.getvalue())
+
+
+def test_every_file_exists_and_pngs_are_not_empty(made: SimpleNamespace) -> None:
+    out = made.out
+    for name in ("report.md", "report.html", "table.md", "table.csv", "tukey.md", "tukey.csv"):
+        assert (out / name).stat().st_size > 0, name
+    heatmaps = sorted((out / "heatmaps").glob("*.png"))
+    curves = sorted((out / "curves").glob("*.png"))
+    assert len(heatmaps) == 7  # 3 true reward + 3 AIRL-Bonus + 1 unfinished GIRIL
+    assert [p.name for p in curves] == [
+        f"Walker2d-v5__{m}.png" for m in ("coverage", "obj_max", "obj_mean", "qd_score")
+    ]
+    for png in heatmaps + curves:
+        data = png.read_bytes()
+        assert data.startswith(PNG_MAGIC) and len(data) > 5000, png
+    report = (out / "report.md").read_text()
+    for png in heatmaps + curves:
+        assert f"]({png.relative_to(out)})" in report  # linked with a relative path
+    assert "| Method | Walker2d n | Walker2d QD-Score | Walker2d Cov(%)" in report
+    assert "<table>" in (out / "report.html").read_text()
+    assert str(out / "report.md") in made.stdout and "| PPGA-trueReward | 3 |" in made.stdout
+
+
+def test_labels_and_sources(made: SimpleNamespace) -> None:
+    runs = {Path(r["path"]).name: r for r in read_csv(made.out / "runs.csv")}
+    assert {name: r["method"] for name, r in runs.items() if r["method"]} == {
+        "true0": "PPGA-trueReward",
+        "true1": "PPGA-trueReward",
+        "true2": "PPGA-trueReward",
+        "airl0": "AIRL-Bonus",
+        "airl1": "AIRL-Bonus",
+        "airl2": "AIRL-Bonus",
+        "giril0": "GIRIL",
+        "broken": "PPGA-trueReward",
+    }
+    for name in ("airl0", "airl1"):
+        assert runs[name]["source"].startswith("corrected (qdil eval")
+        corrected = json.loads((made.runs / name / "eval.json").read_text())["metrics"]
+        assert float(runs[name]["qd_score"]) == pytest.approx(corrected["qd_score"])
+        assert float(runs[name]["coverage_pct"]) == pytest.approx(100 * corrected["coverage"])
+    for name in ("airl2", "true0", "true1", "true2"):
+        assert runs[name]["source"].startswith("training archive")
+    assert runs["airl2"]["qd_score"] == runs["true2"]["qd_score"]  # same archive, relabelled
+    sources = (made.out / "report.md").read_text()
+    assert "Walker2d-v5 / AIRL-Bonus: 2 of 3 run(s) from corrected archives" in sources
+
+
+def test_unfinished_and_missing_runs_are_reported(made: SimpleNamespace) -> None:
+    runs = {Path(r["path"]).name: r for r in read_csv(made.out / "runs.csv")}
+    assert runs["giril0"]["status"] == "included, unfinished"
+    assert "unfinished: 3 iterations logged" in runs["giril0"]["reason"]
+    assert runs["broken"]["status"] == "left out"
+    assert "no metrics.csv" in runs["broken"]["reason"]
+    assert "no readable checkpoint" in runs["broken"]["reason"]
+    assert runs["lost"]["status"] == "left out" and "does not exist" in runs["lost"]["reason"]
+    assert runs["ghost"]["status"] == "left out" and "--label" in runs["ghost"]["reason"]
+    report = (made.out / "report.md").read_text()
+    section = report.split("## Runs left out / unfinished")[1]
+    for name in ("giril0", "broken", "lost", "ghost"):
+        assert name in section
+    table = (made.out / "table.md").read_text()
+    assert "| GIRIL | 1* |" in table and "±0 (n=1)" in table
+    assert "broken: left out" in made.stdout and "giril0: included, unfinished" in made.stdout
+
+
+def test_table_csv_is_mean_and_sample_std_of_the_runs(made: SimpleNamespace) -> None:
+    runs = read_csv(made.out / "runs.csv")
+    table = read_csv(made.out / "table.csv")
+    assert {(r["task"], r["method"]) for r in table} == {
+        ("Walker2d-v5", "PPGA-trueReward"),
+        ("Walker2d-v5", "AIRL-Bonus"),
+        ("Walker2d-v5", "GIRIL"),
+    }
+    for row in table:
+        mine = [r for r in runs if r["method"] == row["method"] and r["status"] != "left out"]
+        assert int(row["n"]) == len(mine)
+        for key in ("qd_score", "qd_score_offset", "coverage_pct", "obj_max", "obj_mean"):
+            values = [float(r[key]) for r in mine]
+            assert float(row[f"{key}_mean"]) == pytest.approx(statistics.mean(values))
+            std = statistics.stdev(values) if len(values) > 1 else 0.0
+            assert float(row[f"{key}_std"]) == pytest.approx(std, abs=1e-12)
+
+
+def test_tukey_csv_equals_scipy_on_the_run_values(made: SimpleNamespace) -> None:
+    runs = [r for r in read_csv(made.out / "runs.csv") if r["status"] != "left out"]
+    groups = {
+        m: np.array([float(r["qd_score"]) for r in runs if r["method"] == m])
+        for m in ("AIRL-Bonus", "PPGA-trueReward")  # GIRIL has one seed: left out
+    }
+    expected = tukey_hsd(groups["AIRL-Bonus"], groups["PPGA-trueReward"]).pvalue[0, 1]
+    (row,) = read_csv(made.out / "tukey.csv")
+    assert (row["group1"], row["group2"]) == ("AIRL-Bonus", "PPGA-trueReward")
+    assert float(row["pvalue"]) == pytest.approx(expected, rel=1e-9)
+    diff = groups["PPGA-trueReward"].mean() - groups["AIRL-Bonus"].mean()
+    assert float(row["diff"]) == pytest.approx(diff)
+    assert row["sign"] == ("+" if diff > 0 else "-")
+    tukey_md = (made.out / "tukey.md").read_text()
+    assert "| AIRL-Bonus | PPGA-trueReward |" in tukey_md
+    assert "GIRIL left out of the Tukey HSD test: 1 seed(s)" in tukey_md
+
+
+def test_label_override(made: SimpleNamespace) -> None:
+    runs = collect_runs([made.runs / "true2"], labels={str(made.runs / "true2"): "Custom"})
+    assert [(r.method, r.status) for r in runs] == [("Custom", "included")]
+    assert runs[0].archive is not None and len(runs[0].archive) > 0
