@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from qdil.cli import main
-from qdil.demos.generate import demos_from_run, farthest_point_sampling, select_elites
+from qdil.demos.generate import farthest_point_sampling, select_elites
 from qdil.demos.importing import import_arrays, import_npz, qpos_from_obs, replay_contacts
 from qdil.demos.io import DemoFormatError, demo_table, load_demos, read_header, save_demos
 
