@@ -1,0 +1,136 @@
+"""Where the time of a QD iteration goes, and its env-steps/s against bare stepping.
+
+Runs a few iterations of a recipe (default: the laptop Walker2d PPGA recipe) with timers
+wrapped around the components, then steps the same task with random actions to measure the
+bare stepping rate of the environment, in the same process:
+
+- physics: ``MujocoBatch.step`` and ``reset`` (the numba kernels);
+- policy inference: sampling actions during rollouts and evaluations;
+- PPO updates: GAE and the minibatch epochs;
+- reward model: ``predict_reward`` and ``update``;
+- archive work: the pyribs scheduler's ask/tell and the passive archives' inserts;
+- other: Python around them (rollout bookkeeping, env step bookkeeping, metrics).
+
+Usage::
+
+    python benchmarks/bench_iteration.py [RECIPE] [--iterations 3]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import tempfile
+import time
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+TIMES: dict[str, float] = defaultdict(float)
+
+
+def timed(owner: object, name: str, label: str) -> None:
+    """Wrap ``owner.name`` so that its wall time accumulates under ``label``."""
+    original = getattr(owner, name)
+
+    def wrapper(*args, **kwargs):
+        start = time.perf_counter()
+        try:
+            return original(*args, **kwargs)
+        finally:
+            TIMES[label] += time.perf_counter() - start
+
+    setattr(owner, name, wrapper)
+
+
+def instrument() -> None:
+    from ribs.schedulers import Scheduler
+
+    from qdil.envs import physics
+    from qdil.qd import archives, loop
+    from qdil.rl import collect, vppo
+
+    timed(physics.MujocoBatch, "step", "physics")
+    timed(physics.MujocoBatch, "reset", "physics")
+    timed(collect, "act", "policy inference")
+    timed(vppo.VPPO, "_ppo_update", "PPO updates")
+    for name in ("ask_dqd", "tell_dqd", "ask", "tell"):
+        timed(Scheduler, name, "archive work")
+    timed(archives.RunArchives, "add", "archive work")
+    original = loop.reward_functions
+
+    def reward_functions(run):
+        train, evaluate = original(run)
+        model = run.reward
+        if not getattr(model, "_timed", False):
+            timed(model, "predict_reward", "reward model")
+            timed(model, "update", "reward model")
+            model._timed = True
+        return train, evaluate
+
+    loop.reward_functions = reward_functions
+
+
+def bare_rate(task: str, num_envs: int, steps: int) -> float:
+    """Env-steps/s of random actions on the task's batched env."""
+    import gymnasium as gym
+
+    env = gym.make_vec(f"qdil/{task}", num_envs=num_envs, autoreset_mode="SameStep")
+    env.reset(seed=0)
+    rng = np.random.default_rng(0)
+    low, high = env.single_action_space.low, env.single_action_space.high
+    actions = rng.uniform(low, high, size=(steps, num_envs, low.size))
+    env.step(actions[0])
+    start = time.perf_counter()
+    for a in actions:
+        env.step(a)
+    return steps * num_envs / (time.perf_counter() - start)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("recipe", nargs="?", default=str(ROOT / "recipes" / "walker_ppga.yaml"))
+    parser.add_argument("--iterations", type=int, default=3)
+    args = parser.parse_args()
+    instrument()
+    import qdil
+    from qdil.cli import main as qdil_main
+
+    with tempfile.TemporaryDirectory() as tmp:
+        os.chdir(tmp)
+        start = time.perf_counter()
+        qdil_main(["fit", args.recipe, "--qd.iterations", str(args.iterations), "--name", "bench",
+                   "--logging.wandb", "disabled", "--logging.progress", "false",
+                   "--logging.checkpoint_every", str(10**6)])  # fmt: skip
+        import csv
+
+        with open(Path(tmp) / "runs" / "bench" / "metrics.csv", newline="") as file:
+            rows = list(csv.DictReader(file))
+        import yaml
+
+        config = yaml.safe_load((Path(tmp) / "runs" / "bench" / "config.yaml").read_text())
+    total = sum(float(r["perf/iter_seconds"]) for r in rows)
+    steps = float(rows[-1]["perf/env_steps"])
+    task, num_envs = config["env"]["task"], config["env"]["num_envs"]
+    bare = bare_rate(task, num_envs, steps=300)
+    print(f"# {Path(args.recipe).name}: {args.iterations} iterations of {task}, "
+          f"qdil {qdil.__version__}, {os.cpu_count()} CPUs, wall {time.perf_counter() - start:.0f} s")
+    print("| component | seconds per iteration | share |\n|---|---|---|")
+    accounted = 0.0
+    for label in ("physics", "policy inference", "PPO updates", "reward model", "archive work"):
+        seconds = TIMES.get(label, 0.0)
+        accounted += seconds
+        print(f"| {label} | {seconds / args.iterations:.2f} | {100 * seconds / total:.1f} % |")
+    other = total - accounted
+    print(f"| other | {other / args.iterations:.2f} | {100 * other / total:.1f} % |")
+    print(f"| **iteration** | **{total / args.iterations:.2f}** | 100 % |")
+    print(f"\nenv-steps/s over whole iterations: {steps / total:,.0f}; bare stepping of "
+          f"{task} with {num_envs} envs (random actions): {bare:,.0f}; ratio {steps / total / bare:.2f}")
+    sys.stdout.flush()
+
+
+if __name__ == "__main__":
+    main()

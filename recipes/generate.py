@@ -1,0 +1,209 @@
+"""Write every recipe of recipes/ and recipes/paper/ from the tables below.
+
+Each recipe stays one self-contained YAML file (no inheritance); this script only keeps the
+~70 files consistent. Edit the tables, run ``python recipes/generate.py``, commit the files.
+``tests/test_recipes.py`` fails when a file differs from what this script writes.
+
+Paper values: the seed paper's hyperparameter tables and PPGA's per-task runner scripts
+(reference/ppga_qdil.md §3, §4.9). Laptop values: reduced to about one hour on 2 CPU
+cores; the reductions are listed in each file's header.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import yaml
+
+HERE = Path(__file__).resolve().parent
+
+TASKS = {
+    "walker": "Walker2d-v5",
+    "halfcheetah": "HalfCheetah-v5",
+    "humanoid": "Humanoid-v5",
+}
+
+# PPGA per task (paper scale): learning rate, adaptive σ, archive α, σ0 of xNES
+PAPER_PPGA = {
+    "walker": {
+        "learning_rate": 0.001,
+        "adaptive_std": False,
+        "archive_learning_rate": 0.5,
+        "sigma0": 1.0,
+    },
+    "halfcheetah": {
+        "learning_rate": 0.001,
+        "adaptive_std": True,
+        "archive_learning_rate": 0.5,
+        "sigma0": 1.0,
+    },
+    "humanoid": {
+        "learning_rate": 0.0003,
+        "adaptive_std": False,
+        "archive_learning_rate": 0.1,
+        "sigma0": 0.5,
+    },
+}
+
+# laptop scale per task: simulations, branches, iterations (about an hour on 2 cores)
+LAPTOP = {
+    "walker": {"num_envs": 48, "batch_size": 16, "iterations": 180},
+    "halfcheetah": {"num_envs": 96, "batch_size": 32, "iterations": 200},
+    "humanoid": {"num_envs": 48, "batch_size": 16, "iterations": 100},
+}
+
+# the QD-IL code's reward-model batch size (gail_batchsize)
+IL_BATCH = {"walker": 120, "halfcheetah": 200, "humanoid": 200}
+
+# method file stem -> (registered reward, bonus, paper display name)
+METHODS = {
+    "mcwae": ("mcwae_wgail", True, "mCWAE-WGAIL-Bonus (WQDIL, the paper's method)"),
+    "wae_wgail": ("wae_wgail", False, "WAE-WGAIL"),
+    "gail": ("gail", False, "GAIL"),
+    "pwil": ("pwil", False, "PWIL"),
+    "airl": ("airl", False, "AIRL"),
+    "maxentirl": ("maxentirl", False, "MaxEntIRL"),
+    "giril": ("giril", False, "GIRIL"),
+    "mcwae_gail_bonus": ("mcwae_gail", True, "mCWAE-GAIL-Bonus (ablation)"),
+    "wae_gail": ("wae_gail", False, "WAE-GAIL (ablation)"),
+    "wae_wgail_bonus": ("wae_wgail", True, "WAE-WGAIL-Bonus (ablation)"),
+    "mcwae_wgail": ("mcwae_wgail", False, "mCWAE-WGAIL (ablation)"),
+}
+
+# rewards whose returns can be negative get a lower CMA-MAE threshold
+SIGNED_REWARDS = {"airl", "maxentirl"}
+
+
+def ppga_sections(task: str, paper: bool) -> dict:
+    """env, rl and qd sections of PPGA for a task at paper or laptop scale."""
+    ppga = PAPER_PPGA[task]
+    laptop = LAPTOP[task]
+    return {
+        "env": {"task": TASKS[task], "num_envs": 3000 if paper else laptop["num_envs"]},
+        "rl": {
+            "class_path": "qdil.rl.VPPO",
+            "init_args": {
+                "rollout_length": 128,
+                "jacobian_iterations": 10,
+                "walk_iterations": 10,
+                "num_minibatches": 8 if paper else 4,
+                "update_epochs": 4,
+                "learning_rate": ppga["learning_rate"],
+                "target_kl": 0.008,
+                "adaptive_std": ppga["adaptive_std"],
+            },
+        },
+        "qd": {
+            "iterations": 2000 if paper else laptop["iterations"],
+            "cells": 50,
+            "archive_learning_rate": ppga["archive_learning_rate"],
+            "threshold_min": 200.0,
+            "branch_episodes": 10 if paper else 2,
+            "mean_episodes": 3000 if paper else 8,
+            "emitter": {
+                "class_path": "qdil.qd.PPGAEmitter",
+                "init_args": {
+                    "batch_size": 300 if paper else laptop["batch_size"],
+                    "sigma0": ppga["sigma0"],
+                },
+            },
+        },
+    }
+
+
+def with_logging(sections: dict, paper: bool) -> dict:
+    """Sections plus checkpoints every 20 iterations (paper: every 10, as PPGA)."""
+    return {**sections, "logging": {"checkpoint_every": 10 if paper else 20}}
+
+
+def reward_section(task: str, reward: str, paper: bool) -> dict | str:
+    """The reward section: a registered name, with the paper's options where they differ."""
+    if reward == "true_reward":
+        return "true_reward"
+    args: dict = {}
+    if reward not in ("pwil", "giril"):
+        args["batch_size"] = IL_BATCH[task]
+    if reward == "giril":
+        args["pretrain_epochs"] = 10000 if paper else 100
+    return {"class_path": reward, "init_args": args} if args else reward
+
+
+def header(lines: list[str]) -> str:
+    """Comment lines of a recipe file."""
+    return "".join(f"# {line}\n" if line else "#\n" for line in lines)
+
+
+def reductions(task: str) -> list[str]:
+    """Header lines listing a laptop recipe's reductions from the paper."""
+    laptop = LAPTOP[task]
+    envs, branches, iterations = laptop["num_envs"], laptop["batch_size"], laptop["iterations"]
+    return [
+        "Laptop default, about one hour on 2 CPU cores. Reductions from the paper version",
+        f"(recipes/paper/): simulations 3000 -> {envs}, branches per iteration 300 -> {branches},",
+        "episodes per branch 10 -> 2, episodes scoring the search policy 3000 -> 8,",
+        f"PPO minibatches 8 -> 4, iterations 2000 -> {iterations}. The rest is the paper's.",
+    ]
+
+
+def recipe(task: str, method: str | None, paper: bool) -> tuple[str, dict]:
+    """(header text, recipe) of a task and method (``None`` for PPGA on the true reward)."""
+    sections = with_logging(ppga_sections(task, paper), paper)
+    scale = (
+        ["Paper scale: the published hyperparameters (a GPU-sized budget)."]
+        if paper
+        else reductions(task)
+    )
+    if method is None:
+        title = f"PPGA on {TASKS[task]} with the true reward (PPGA-trueReward, the expert)."
+        body = {"seed": 0, "reward": "true_reward", **sections}
+    else:
+        reward, bonus, label = METHODS[method]
+        title = f"{label} on {TASKS[task]}: imitation from the shipped demonstrations."
+        sections["qd"]["threshold_min"] = -1000.0 if reward in SIGNED_REWARDS else 0.0
+        body = {
+            "seed": 0,
+            "reward": reward_section(task, reward, paper),
+            "bonus": {"enabled": bonus},
+            "demos": {"path": task if task != "walker" else "walker2d"},
+            **sections,
+        }
+        scale = [
+            *scale,
+            "The archive ranks by learned return (+bonus), so threshold_min is in "
+            "learned-return units.",
+            "Metrics are on the true return.",
+        ]
+    return header([title, *scale]), body
+
+
+def files() -> dict[Path, str]:
+    """Every recipe path and its text."""
+    out = {}
+    for task in TASKS:
+        for paper in (False, True):
+            folder = HERE / "paper" if paper else HERE
+            for method in (None, *METHODS):
+                stem = f"{task}_ppga" if method is None else f"{task}_{method}"
+                text, body = recipe(task, method, paper)
+                out[folder / f"{stem}.yaml"] = text + yaml.safe_dump(body, sort_keys=False)
+    return out
+
+
+def main() -> None:
+    """Write the recipes (``--check``: only report files that differ)."""
+    check = "--check" in sys.argv
+    stale = []
+    for path, text in files().items():
+        if check:
+            if not path.exists() or path.read_text() != text:
+                stale.append(path)
+            continue
+        path.parent.mkdir(exist_ok=True)
+        path.write_text(text)
+    if check and stale:
+        raise SystemExit("out of date: " + ", ".join(str(p) for p in stale))
+
+
+if __name__ == "__main__":
+    main()
