@@ -100,6 +100,40 @@ def test_import_from_plain_arrays_recomputes_contacts(walker_demos, tmp_path) ->
     np.testing.assert_array_equal(import_npz(str(d4rl), "Walker2d-v5").contacts, demos.contacts)
 
 
+def test_import_from_a_minari_dataset_replays_contacts(walker_demos, tmp_path, monkeypatch) -> None:
+    minari = pytest.importorskip("minari")
+    import gymnasium as gym
+    from minari.data_collector.episode_buffer import EpisodeBuffer
+
+    from qdil.demos.importing import import_minari
+
+    monkeypatch.setenv("MINARI_DATASETS_PATH", str(tmp_path))
+    demos = load_demos(walker_demos)
+    buffers = []
+    for i, (a, b) in enumerate(zip(demos.episode_starts, demos.episode_ends, strict=True)):
+        steps = b - a
+        buffers.append(
+            EpisodeBuffer(
+                id=i,
+                observations=np.vstack([demos.obs[a:b], demos.next_obs[b - 1]]),
+                actions=demos.actions[a:b],
+                rewards=demos.rewards[a:b],
+                terminations=np.r_[np.zeros(steps - 1, bool), demos.terminated[i]],
+                truncations=np.r_[np.zeros(steps - 1, bool), not demos.terminated[i]],
+            )
+        )
+    with pytest.warns(UserWarning, match="author"):  # minari asks for metadata we skip
+        minari.create_dataset_from_buffers("test/walker2d/qdil-v0", buffer=buffers,
+                                           env=gym.make("Walker2d-v5"), algorithm_name="qdil",
+                                           data_format="hdf5")  # fmt: skip
+    imported = import_minari("test/walker2d/qdil-v0")
+    assert imported.task == "Walker2d-v5"
+    np.testing.assert_array_equal(imported.contacts, demos.contacts)
+    np.testing.assert_array_equal(imported.next_contacts, demos.next_contacts)
+    np.testing.assert_array_equal(imported.terminated, demos.terminated)
+    np.testing.assert_allclose(imported.returns, demos.returns, rtol=1e-5)
+
+
 def test_import_refuses_misaligned_arrays() -> None:
     with pytest.raises(DemoFormatError, match=r"episode 0: actions must be \(3, 6\)"):
         import_arrays("Walker2d-v5", [np.zeros((4, 17))], [np.zeros((4, 6))])
