@@ -14,6 +14,7 @@ from __future__ import annotations
 from collections.abc import Iterator
 
 import torch
+from torch.optim import Optimizer
 
 from qdil.data import TransitionBatch
 from qdil.rewards.base import RewardModel
@@ -21,6 +22,9 @@ from qdil.rewards.base import RewardModel
 
 class AdversarialReward(RewardModel):
     """Base of GAIL, AIRL, MaxEntIRL and the WAE family.
+
+    Subclasses take their own options and pass ``**kwargs`` on, so that these options are
+    accepted by every adversarial model (and validated by the recipe parser).
 
     Args:
         obs_dim: observation size.
@@ -67,6 +71,17 @@ class AdversarialReward(RewardModel):
         if self.use_measures:
             parts.append(batch.contacts)
         return torch.cat(parts, dim=1)
+
+    def descend(self, optimizer: Optimizer, loss: torch.Tensor, what: str, iteration: int) -> None:
+        """One manual-optimisation step on ``loss`` (Lightning's ``manual_backward``).
+
+        Raises:
+            NonFiniteRewardError: if the loss is NaN or inf, naming ``what`` and the iteration.
+        """
+        self.check_finite(loss.detach(), what, iteration)
+        optimizer.zero_grad()
+        self.manual_backward(loss)
+        optimizer.step()
 
     def minibatches(
         self, expert: TransitionBatch, policy: TransitionBatch

@@ -10,6 +10,7 @@ adds β (E_x[KL(E(z | x) ‖ N(0, I))] − I_c), with β adapted by dual gradien
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 
 import torch
 import torch.nn.functional as F
@@ -52,22 +53,9 @@ class VAIL(AdversarialReward):
         information_constraint: float = 0.5,
         beta: float = 1.0,
         beta_step: float = 1e-5,
-        use_measures: bool = False,
-        learning_rate: float = 3e-4,
-        batch_size: int = 200,
-        epochs: int = 1,
-        gp_weight: float = 10.0,
+        **kwargs: Any,
     ) -> None:
-        super().__init__(
-            obs_dim,
-            action_dim,
-            num_measures,
-            use_measures=use_measures,
-            learning_rate=learning_rate,
-            batch_size=batch_size,
-            epochs=epochs,
-            gp_weight=gp_weight,
-        )
+        super().__init__(obs_dim, action_dim, num_measures, **kwargs)
         self.information_constraint = information_constraint
         self.beta_step = beta_step
         self.encoder = mlp(self.input_dim, hidden, 2 * latent_dim)
@@ -111,10 +99,7 @@ class VAIL(AdversarialReward):
                     return self.head(self.encode(inputs)[0]).squeeze(-1)
 
                 loss = loss + self.gp_weight * gradient_penalty(critic, x[:half], x[half:])
-            self.check_finite(loss.detach(), "discriminator loss", iteration)
-            optimizer.zero_grad()
-            self.manual_backward(loss)
-            optimizer.step()
+            self.descend(optimizer, loss, "discriminator loss", iteration)
             with torch.no_grad():
                 self.beta.copy_(
                     (self.beta + self.beta_step * (kl - self.information_constraint)).clamp_min(0)

@@ -9,7 +9,7 @@ uses. With ``use_measures`` it is the measure-conditioned GAIL of Eq. (GAIL) in 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Literal
+from typing import Any, Literal
 
 import torch
 import torch.nn.functional as F
@@ -44,22 +44,9 @@ class GAIL(AdversarialReward):
         *,
         hidden: Sequence[int] = (100, 100),
         reward_type: Literal["log1-d", "logd", "logit"] = "log1-d",
-        use_measures: bool = False,
-        learning_rate: float = 3e-4,
-        batch_size: int = 200,
-        epochs: int = 1,
-        gp_weight: float = 10.0,
+        **kwargs: Any,
     ) -> None:
-        super().__init__(
-            obs_dim,
-            action_dim,
-            num_measures,
-            use_measures=use_measures,
-            learning_rate=learning_rate,
-            batch_size=batch_size,
-            epochs=epochs,
-            gp_weight=gp_weight,
-        )
+        super().__init__(obs_dim, action_dim, num_measures, **kwargs)
         self.reward_type = reward_type
         self.discriminator = mlp(self.input_dim, hidden, 1)
 
@@ -94,10 +81,7 @@ class GAIL(AdversarialReward):
             loss = loss + F.binary_cross_entropy_with_logits(logit_p, torch.zeros_like(logit_p))
             gp = gradient_penalty(self.logits, x_e, x_p) if self.gp_weight else torch.zeros(())
             loss = loss + self.gp_weight * gp
-            self.check_finite(loss.detach(), "discriminator loss", iteration)
-            optimizer.zero_grad()
-            self.manual_backward(loss)
-            optimizer.step()
+            self.descend(optimizer, loss, "discriminator loss", iteration)
             sums["loss"] += float(loss.detach())
             sums["gp"] += float(gp.detach())
             sums["expert_acc"] += float((logit_e > 0).float().mean())

@@ -9,6 +9,7 @@ weight decay. The loss is linear in r, so the reward is clamped to ±``clamp``.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 
 import torch
 from typing_extensions import override
@@ -44,22 +45,9 @@ class MaxEntIRL(AdversarialReward):
         hidden: Sequence[int] = (100, 100),
         clamp: float = 10.0,
         weight_decay: float = 1e-3,
-        use_measures: bool = False,
-        learning_rate: float = 3e-4,
-        batch_size: int = 200,
-        epochs: int = 1,
-        gp_weight: float = 10.0,
+        **kwargs: Any,
     ) -> None:
-        super().__init__(
-            obs_dim,
-            action_dim,
-            num_measures,
-            use_measures=use_measures,
-            learning_rate=learning_rate,
-            batch_size=batch_size,
-            epochs=epochs,
-            gp_weight=gp_weight,
-        )
+        super().__init__(obs_dim, action_dim, num_measures, **kwargs)
         self.clamp = clamp
         self.weight_decay = weight_decay
         self.net = mlp(self.input_dim, hidden, 1)
@@ -93,10 +81,7 @@ class MaxEntIRL(AdversarialReward):
             r_e, r_p = self.raw(x_e), self.raw(x_p)
             gp = gradient_penalty(self.raw, x_e, x_p) if self.gp_weight else torch.zeros(())
             loss = r_p.mean() - r_e.mean() + self.gp_weight * gp
-            self.check_finite(loss.detach(), "reward loss", iteration)
-            optimizer.zero_grad()
-            self.manual_backward(loss)
-            optimizer.step()
+            self.descend(optimizer, loss, "reward loss", iteration)
             for key, value in (
                 ("loss", loss),
                 ("gp", gp),

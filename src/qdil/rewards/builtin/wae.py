@@ -23,7 +23,7 @@ and adversary widths (100, 100), latent size 8, a Gaussian encoder.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Literal
+from typing import Any, Literal
 
 import torch
 import torch.nn.functional as F
@@ -60,22 +60,9 @@ class WAEReward(AdversarialReward):
         hidden: Sequence[int] = (100, 100),
         regularization: float = 1.0,
         reward_type: Literal["gail", "critic", "sigmoid"] = "gail",
-        use_measures: bool = False,
-        learning_rate: float = 3e-4,
-        batch_size: int = 200,
-        epochs: int = 1,
-        gp_weight: float = 10.0,
+        **kwargs: Any,
     ) -> None:
-        super().__init__(
-            obs_dim,
-            action_dim,
-            num_measures,
-            use_measures=use_measures,
-            learning_rate=learning_rate,
-            batch_size=batch_size,
-            epochs=epochs,
-            gp_weight=gp_weight,
-        )
+        super().__init__(obs_dim, action_dim, num_measures, **kwargs)
         self.latent_dim = latent_dim
         self.regularization = regularization
         self.reward_type = reward_type
@@ -151,17 +138,11 @@ class WAEReward(AdversarialReward):
                 else torch.zeros(())
             )
             adversary_loss = self.adversary_loss(codes_e, codes_p) + self.gp_weight * gp
-            self.check_finite(adversary_loss.detach(), "latent adversary loss", iteration)
-            adversary_opt.zero_grad()
-            self.manual_backward(adversary_loss)
-            adversary_opt.step()
+            self.descend(adversary_opt, adversary_loss, "latent adversary loss", iteration)
             # ---- auto-encoder step
             reconstruction = self.reconstruction(x_e, z_e) + self.reconstruction(x_p, z_p)
             ae_loss = reconstruction + self.autoencoder_adversarial_loss(z_e, z_p)
-            self.check_finite(ae_loss.detach(), "auto-encoder loss", iteration)
-            ae_opt.zero_grad()
-            self.manual_backward(ae_loss)
-            ae_opt.step()
+            self.descend(ae_opt, ae_loss, "auto-encoder loss", iteration)
             with torch.no_grad():
                 gap = self.critic(codes_e).mean() - self.critic(codes_p).mean()
             for key, value in (
@@ -202,6 +183,9 @@ class WAEWGAIL(WAEReward):
     """WAE-WGAIL: a latent Wasserstein critic (gradient penalty) beside the auto-encoder.
 
     Args:
+        obs_dim: observation size.
+        action_dim: action size.
+        num_measures: k.
         adversarial_ae: add Eq. 8's λ·E[D_W(z^e) − D_W(z^π)] to the auto-encoder's loss; the
             paper's Algorithms 3–4 leave it out (decision D7, default False).
         **kwargs: :class:`WAEReward` options.
@@ -216,30 +200,9 @@ class WAEWGAIL(WAEReward):
         num_measures: int,
         *,
         adversarial_ae: bool = False,
-        latent_dim: int = 8,
-        hidden: Sequence[int] = (100, 100),
-        regularization: float = 1.0,
-        reward_type: Literal["gail", "critic", "sigmoid"] = "gail",
-        use_measures: bool = False,
-        learning_rate: float = 3e-4,
-        batch_size: int = 200,
-        epochs: int = 1,
-        gp_weight: float = 10.0,
+        **kwargs: Any,
     ) -> None:
-        super().__init__(
-            obs_dim,
-            action_dim,
-            num_measures,
-            latent_dim=latent_dim,
-            hidden=hidden,
-            regularization=regularization,
-            reward_type=reward_type,
-            use_measures=use_measures,
-            learning_rate=learning_rate,
-            batch_size=batch_size,
-            epochs=epochs,
-            gp_weight=gp_weight,
-        )
+        super().__init__(obs_dim, action_dim, num_measures, **kwargs)
         self.adversarial_ae = adversarial_ae
         # the Wasserstein loss cannot see a constant offset of D_W: no bias on its output
         last = self.adversary[-1]
@@ -259,7 +222,15 @@ class WAEWGAIL(WAEReward):
 
 @register_reward("mcwae_wgail")
 class MCWAEWGAIL(WAEWGAIL):
-    """mCWAE-WGAIL: WAE-WGAIL on x = (s, a, δ(s)); with the bonus, WQDIL's reward."""
+    """mCWAE-WGAIL: WAE-WGAIL on x = (s, a, δ(s)); with the bonus, WQDIL's reward.
+
+    Args:
+        obs_dim: observation size.
+        action_dim: action size.
+        num_measures: k.
+        use_measures: measure conditioning, on by default: this is what "mC" names.
+        **kwargs: :class:`WAEWGAIL` options.
+    """
 
     description = "mCWAE-WGAIL (WQDIL): measure-conditioned WAE-WGAIL, the paper's method"
 
@@ -269,37 +240,23 @@ class MCWAEWGAIL(WAEWGAIL):
         action_dim: int,
         num_measures: int,
         *,
-        adversarial_ae: bool = False,
-        latent_dim: int = 8,
-        hidden: Sequence[int] = (100, 100),
-        regularization: float = 1.0,
-        reward_type: Literal["gail", "critic", "sigmoid"] = "gail",
         use_measures: bool = True,
-        learning_rate: float = 3e-4,
-        batch_size: int = 200,
-        epochs: int = 1,
-        gp_weight: float = 10.0,
+        **kwargs: Any,
     ) -> None:
-        super().__init__(
-            obs_dim,
-            action_dim,
-            num_measures,
-            adversarial_ae=adversarial_ae,
-            latent_dim=latent_dim,
-            hidden=hidden,
-            regularization=regularization,
-            reward_type=reward_type,
-            use_measures=use_measures,
-            learning_rate=learning_rate,
-            batch_size=batch_size,
-            epochs=epochs,
-            gp_weight=gp_weight,
-        )
+        super().__init__(obs_dim, action_dim, num_measures, use_measures=use_measures, **kwargs)
 
 
 @register_reward("mcwae_gail")
 class MCWAEGAIL(WAEGAIL):
-    """mCWAE-GAIL: WAE-GAIL on x = (s, a, δ(s)) (the paper's ablation)."""
+    """mCWAE-GAIL: WAE-GAIL on x = (s, a, δ(s)) (the paper's ablation).
+
+    Args:
+        obs_dim: observation size.
+        action_dim: action size.
+        num_measures: k.
+        use_measures: measure conditioning, on by default.
+        **kwargs: :class:`WAEReward` options.
+    """
 
     description = "mCWAE-GAIL (WQDIL ablation): measure-conditioned WAE-GAIL"
 
@@ -309,27 +266,7 @@ class MCWAEGAIL(WAEGAIL):
         action_dim: int,
         num_measures: int,
         *,
-        latent_dim: int = 8,
-        hidden: Sequence[int] = (100, 100),
-        regularization: float = 1.0,
-        reward_type: Literal["gail", "critic", "sigmoid"] = "gail",
         use_measures: bool = True,
-        learning_rate: float = 3e-4,
-        batch_size: int = 200,
-        epochs: int = 1,
-        gp_weight: float = 10.0,
+        **kwargs: Any,
     ) -> None:
-        super().__init__(
-            obs_dim,
-            action_dim,
-            num_measures,
-            latent_dim=latent_dim,
-            hidden=hidden,
-            regularization=regularization,
-            reward_type=reward_type,
-            use_measures=use_measures,
-            learning_rate=learning_rate,
-            batch_size=batch_size,
-            epochs=epochs,
-            gp_weight=gp_weight,
-        )
+        super().__init__(obs_dim, action_dim, num_measures, use_measures=use_measures, **kwargs)
