@@ -116,8 +116,11 @@ def main() -> None:
     steps = float(rows[-1]["perf/env_steps"])
     task, num_envs = config["env"]["task"], config["env"]["num_envs"]
     bare = bare_rate(task, num_envs, steps=300)
-    print(f"# {Path(args.recipe).name}: {args.iterations} iterations of {task}, "
-          f"qdil {qdil.__version__}, {os.cpu_count()} CPUs, wall {time.perf_counter() - start:.0f} s")
+    wall = time.perf_counter() - start
+    print(
+        f"# {Path(args.recipe).name}: {args.iterations} iterations of {task}, "
+        f"qdil {qdil.__version__}, {os.cpu_count()} CPUs, wall {wall:.0f} s"
+    )
     print("| component | seconds per iteration | share |\n|---|---|---|")
     accounted = 0.0
     for label in ("physics", "policy inference", "PPO updates", "reward model", "archive work"):
@@ -127,8 +130,11 @@ def main() -> None:
     other = total - accounted
     print(f"| other | {other / args.iterations:.2f} | {100 * other / total:.1f} % |")
     print(f"| **iteration** | **{total / args.iterations:.2f}** | 100 % |")
-    print(f"\nenv-steps/s over whole iterations: {steps / total:,.0f}; bare stepping of "
-          f"{task} with {num_envs} envs (random actions): {bare:,.0f}; ratio {steps / total / bare:.2f}")
+    rate = steps / total
+    print(
+        f"\nenv-steps/s over whole iterations: {rate:,.0f}; bare stepping of {task} with "
+        f"{num_envs} envs (random actions): {bare:,.0f}; ratio {rate / bare:.2f}"
+    )
     sys.stdout.flush()
 
 

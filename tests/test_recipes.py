@@ -13,6 +13,20 @@ from qdil.rl.vppo import VPPO
 
 ROOT = Path(__file__).resolve().parents[1]
 RECIPES = sorted((ROOT / "recipes").rglob("*.yaml"))
+METHODS = (
+    "ppga",
+    "mcwae",
+    "wae_wgail",
+    "gail",
+    "pwil",
+    "airl",
+    "maxentirl",
+    "giril",
+    "mcwae_gail_bonus",
+    "wae_gail",
+    "wae_wgail_bonus",
+    "mcwae_wgail",
+)
 
 
 def test_generated_recipes_are_up_to_date() -> None:
@@ -22,13 +36,14 @@ def test_generated_recipes_are_up_to_date() -> None:
 def test_the_flagship_and_every_paper_row_have_recipes() -> None:
     names = {p.relative_to(ROOT / "recipes").as_posix() for p in RECIPES}
     for task in ("walker", "halfcheetah", "humanoid"):
-        for method in ("ppga", "mcwae", "wae_wgail", "gail", "pwil", "airl", "maxentirl", "giril",
-                       "mcwae_gail_bonus", "wae_gail", "wae_wgail_bonus", "mcwae_wgail"):  # fmt: skip
+        for method in METHODS:
             assert f"{task}_{method}.yaml" in names
             assert f"paper/{task}_{method}.yaml" in names
 
 
-@pytest.mark.parametrize("recipe", RECIPES, ids=lambda p: p.relative_to(ROOT / "recipes").as_posix())
+@pytest.mark.parametrize(
+    "recipe", RECIPES, ids=lambda p: p.relative_to(ROOT / "recipes").as_posix()
+)
 def test_recipe_parses_and_instantiates(recipe: Path) -> None:
     config, _, _ = parse_fit([str(recipe)])
     init = fit_parser().instantiate(config)

@@ -184,6 +184,7 @@ def fit(argv: list[str]) -> None:
         qd=init.qd,
         logging=init.logging,
         config=yaml.safe_load(resolved),
+        resume=resume_dir is not None,
     )
     if resume_dir is not None:
         load_checkpoint(run)
@@ -353,7 +354,14 @@ def main(argv: list[str] | None = None) -> None:
     command, rest = argv[0], argv[1:]
     if command not in COMMANDS:
         parser.error(f"unknown command {command!r}; choose from {', '.join(sorted(COMMANDS))}")
-    COMMANDS[command](rest)
+    from qdil.demos.io import DemoFormatError
+    from qdil.qd.checkpoint import CheckpointError
+
+    try:
+        COMMANDS[command](rest)
+    except (ValueError, FileNotFoundError, CheckpointError, DemoFormatError, ImportError) as error:
+        # a bad recipe, file or plugin: the message says what and how to fix it
+        raise SystemExit(f"qdil {command}: error: {error}") from error
 
 
 if __name__ == "__main__":

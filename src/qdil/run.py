@@ -68,8 +68,12 @@ def build_run(
     qd: QDConfig,
     logging: LoggingConfig,
     config: dict[str, Any],
+    resume: bool = False,
 ) -> Run:
     """Build every component of a run from the instantiated recipe sections.
+
+    With ``resume``, the reward model's offline pretraining is skipped: the checkpoint
+    that :func:`~qdil.qd.checkpoint.load_checkpoint` restores next holds its result.
 
     Raises:
         ValueError: for inconsistent settings, naming the recipe key.
@@ -175,6 +179,8 @@ def build_run(
 
         demo_set = load_demos(demos.path, task=env.task, num_episodes=demos.num_episodes)
     model.setup(demo_set)
+    if not resume:  # a resumed run's checkpoint holds the pretrained weights
+        model.pretrain(demo_set)
     expert = demo_set.transitions() if demo_set is not None else None
 
     run_dir.mkdir(parents=True, exist_ok=True)

@@ -109,3 +109,19 @@ def test_killed_run_resumes_to_the_same_archive(tmp_path: Path) -> None:
 def test_resume_of_a_directory_without_a_run_is_refused(tmp_path: Path) -> None:
     result = qdil("fit", "--resume", str(tmp_path), cwd=tmp_path, check=False)
     assert result.returncode != 0 and "not a qdil run directory" in result.stderr
+
+
+def test_bad_checkpoints_are_reported_with_the_file(tmp_path: Path) -> None:
+    qdil("fit", str(SMOKE), "--name", "ck", "--qd.iterations", "2", cwd=tmp_path)
+    run_dir = tmp_path / "runs" / "ck"
+    checkpoint = run_dir / "checkpoints" / "last.pt"
+    config = (run_dir / "config.yaml").read_text()
+    (run_dir / "config.yaml").write_text(config.replace("task: Walker2d-v5", "task: Hopper-v5"))
+    result = qdil("fit", "--resume", str(run_dir), cwd=tmp_path, check=False)
+    assert "belongs to a Walker2d-v5 run, not Hopper-v5" in result.stderr
+    (run_dir / "config.yaml").write_text(config)
+    checkpoint.write_bytes(checkpoint.read_bytes()[:1000])
+    result = qdil("fit", "--resume", str(run_dir), cwd=tmp_path, check=False)
+    assert result.returncode != 0
+    assert f"{checkpoint} is not a readable qdil checkpoint" in result.stderr
+    assert "Traceback" not in result.stderr

@@ -64,7 +64,7 @@ def test_fit_runs_each_reward_family(
 def test_imitation_without_demos_is_refused(tmp_path: Path, monkeypatch) -> None:
     monkeypatch.chdir(tmp_path)
     with pytest.raises(
-        ValueError, match=r"demos\.path: the gail reward model needs demonstrations"
+        SystemExit, match=r"demos\.path: the gail reward model needs demonstrations"
     ):
         main(["fit", str(RECIPE), "--name", "x"])
 
@@ -72,7 +72,7 @@ def test_imitation_without_demos_is_refused(tmp_path: Path, monkeypatch) -> None
 def test_demos_of_another_task_are_refused(walker_demos: Path, tmp_path: Path, monkeypatch) -> None:
     monkeypatch.chdir(tmp_path)
     with pytest.raises(
-        ValueError, match="recorded on 'Walker2d-v5', but the run's task is 'Hopper-v5'"
+        SystemExit, match="recorded on 'Walker2d-v5', but the run's task is 'Hopper-v5'"
     ):
         main(
             [

@@ -92,7 +92,9 @@ def trained(name: str, expert: TransitionBatch, policy: TransitionBatch, updates
         optimizers = model.configure_optimizers()
         optimizers = optimizers if isinstance(optimizers, list) else [optimizers]
         Fabric(accelerator="cpu", devices=1).setup(model, *optimizers)
-    model.setup(demos_of(expert) if model.needs_demos else None)
+    demos = demos_of(expert) if model.needs_demos else None
+    model.setup(demos)
+    model.pretrain(demos)
     if model.learned:
         for i in range(updates):
             metrics = model.update(expert, policy, iteration=i)

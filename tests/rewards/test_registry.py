@@ -25,6 +25,7 @@ BUILTINS = {
 
 @pytest.fixture
 def clean_registry(monkeypatch):
+    registry.discover()  # built-ins first, so the copy below holds them
     monkeypatch.setattr(registry, "_REGISTRY", dict(registry._REGISTRY))
     monkeypatch.setattr(registry, "_discovered", False)
     for name in [m for m in sys.modules if m.startswith(registry.LOCAL_PACKAGE)]:

@@ -149,20 +149,19 @@ def qd_iteration(run: Run) -> dict[str, float]:
     }
     timings["walk"] = time.perf_counter() - tic_walk
 
-    # ---- 4. reward model update (once per iteration, on this iteration's policy data)
-    reward_metrics: dict[str, float] = {}
-    if run.reward.learned:
-        tic_reward = time.perf_counter()
-        policy = TransitionBatch.cat([r.transitions() for r in walk.rollouts])
-        expert = run.expert
-        if run.reward.needs_log_probs:  # AIRL: both batches under the walked θ_μ
-            logp = partial(vppo.log_probs, walk.solutions[0], walk.stats)
-            expert = replace(expert, log_probs=logp(expert.obs, expert.actions))
-            policy = replace(policy, log_probs=logp(policy.obs, policy.actions))
-        reward_metrics = run.reward.update(expert, policy, state.iteration)
-        for key, value in reward_metrics.items():
-            run.reward.check_finite(torch.as_tensor(value), f"update metric {key}", state.iteration)
-        timings["reward_update"] = time.perf_counter() - tic_reward
+    # ---- 4. reward model update (once per iteration, on this iteration's policy data);
+    # fixed rewards return {}, the bonus wrapper still reports its counts
+    tic_reward = time.perf_counter()
+    policy = TransitionBatch.cat([r.transitions() for r in walk.rollouts])
+    expert = run.expert
+    if run.reward.needs_log_probs:  # AIRL: both batches under the walked θ_μ
+        logp = partial(vppo.log_probs, walk.solutions[0], walk.stats)
+        expert = replace(expert, log_probs=logp(expert.obs, expert.actions))
+        policy = replace(policy, log_probs=logp(policy.obs, policy.actions))
+    reward_metrics = run.reward.update(expert, policy, state.iteration)
+    for key, value in reward_metrics.items():
+        run.reward.check_finite(torch.as_tensor(value), f"update metric {key}", state.iteration)
+    timings["reward_update"] = time.perf_counter() - tic_reward
 
     # ---- 5. metrics
     seconds = time.perf_counter() - tic

@@ -55,6 +55,7 @@ class AdversarialReward(RewardModel):
         if gp_weight < 0:
             raise ValueError(f"{type(self).__name__}: gp_weight must be >= 0, got {gp_weight}")
         self.use_measures = use_measures
+        self.uses_measures = use_measures  # the declared need follows the option
         self.learning_rate = learning_rate
         self.batch_size = batch_size
         self.epochs = epochs

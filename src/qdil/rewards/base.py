@@ -8,9 +8,11 @@ no-grad :meth:`RewardModel.predict_reward` that hands per-step rewards to RL.
 Lifecycle, driven by the QD loop:
 
 1. ``__init__(obs_dim, action_dim, num_measures, **hyperparameters)``: build networks.
-2. ``setup(demos)`` once: fit the input normalisation on the demonstrations and do any
-   offline fitting (PWIL's expert atoms, GIRIL's pretraining). Lightning's own ``setup``
-   hook is never called under Fabric, so the name is free for this purpose.
+2. ``setup(demos)`` once: fit the input normalisation on the demonstrations and build what
+   depends on them (PWIL's expert atoms). Lightning's own ``setup`` hook is never called
+   under Fabric, so the name is free for this purpose. Then ``pretrain(demos)`` for
+   expensive offline fitting (GIRIL's conditional VAE); a resumed run skips it, since its
+   checkpoint holds the result.
 3. Every QD iteration: ``predict_reward(rollout, update=True)`` on the training rollouts,
    ``predict_reward(rollout)`` on evaluation episodes, then one ``update(expert, policy,
    iteration)`` on expert and policy transitions (decision D3).
@@ -101,17 +103,26 @@ class RewardModel(L.LightningModule):
         self.action_mean.copy_(batch.actions.mean(0))
         self.action_std.copy_(batch.actions.std(0).clamp_min(1e-3))
 
+    def pretrain(self, demos: DemoSet | None) -> None:
+        """Offline fitting on the demonstrations, once, after :meth:`setup` (default: none).
+
+        Not called when a run resumes from a checkpoint, which restores its result.
+        """
+
     def reward(self, batch: TransitionBatch) -> torch.Tensor:
         """(B,) differentiable reward of transitions; what :meth:`update` trains."""
         raise NotImplementedError(f"{type(self).__name__} must implement reward(batch)")
 
     def update(
-        self, expert: TransitionBatch, policy: TransitionBatch, iteration: int
+        self, expert: TransitionBatch | None, policy: TransitionBatch, iteration: int
     ) -> dict[str, float]:
         """One reward-model update per QD iteration; returns metrics to log.
 
+        Called every iteration for every model; fixed rewards return ``{}``.
+
         Args:
-            expert: expert transitions from the demonstrations.
+            expert: expert transitions from the demonstrations (``None`` when the model
+                declares ``needs_demos = False``).
             policy: transitions of the current search policy from this iteration.
             iteration: the QD iteration (Lightning's ``global_step`` is 0 under Fabric).
         """

@@ -50,6 +50,7 @@ class ExplorationBonus(RewardModel):
         self.learned = model.learned
         self.needs_demos = model.needs_demos
         self.needs_log_probs = model.needs_log_probs
+        self.needs_next_obs = model.needs_next_obs
         self.uses_measures = model.uses_measures
         self.prefers_expert = model.prefers_expert
 
@@ -80,6 +81,10 @@ class ExplorationBonus(RewardModel):
         self.model.setup(demos)
 
     @override
+    def pretrain(self, demos: DemoSet | None) -> None:
+        self.model.pretrain(demos)
+
+    @override
     def configure_optimizers(self) -> Any:
         return self.model.configure_optimizers()
 
@@ -89,7 +94,7 @@ class ExplorationBonus(RewardModel):
 
     @override
     def update(
-        self, expert: TransitionBatch, policy: TransitionBatch, iteration: int
+        self, expert: TransitionBatch | None, policy: TransitionBatch, iteration: int
     ) -> dict[str, float]:
         metrics = self.model.update(expert, policy, iteration)
         share = self.counts / self.counts.sum()

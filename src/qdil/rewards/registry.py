@@ -73,7 +73,10 @@ def register_reward(name: str) -> Callable[[type[RewardModel]], type[RewardModel
                 f"({existing.source}) and {_qualname(cls)} ({_current_source}); rename one"
             )
         cls.name = name
-        _REGISTRY[name] = RegisteredReward(name, cls, _current_source)
+        source = _current_source
+        if source == "qdil (built-in)" and not cls.__module__.startswith("qdil."):
+            source = f"module {cls.__module__}"  # registered by a plain import
+        _REGISTRY[name] = RegisteredReward(name, cls, source)
         return cls
 
     return decorator

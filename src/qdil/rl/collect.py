@@ -274,7 +274,7 @@ def evaluate_policies(
     env_steps = 0
     actions_full = np.zeros((env.num_envs, env.single_action_space.shape[0]))
     while running.any():
-        _, actions, _ = act(actor, stats, obs_t, obs_clip, generator, deterministic)
+        _, actions, log_probs = act(actor, stats, obs_t, obs_clip, generator, deterministic)
         executed = action_map(actions)
         actions_full[:used] = executed.numpy()
         active = running.copy()
@@ -299,7 +299,7 @@ def evaluate_policies(
                     "rewards": torch.from_numpy(reward[:used]).float(),
                     "dones": torch.from_numpy(done.astype(np.float32)),
                     "terminated": torch.from_numpy(terminated[:used].astype(np.float32)),
-                    "log_probs": torch.zeros(used),
+                    "log_probs": log_probs,
                     "valid": torch.from_numpy(active[:used].astype(np.float32)),
                     "starts": torch.full((used,), float(not steps)),
                 }

@@ -98,8 +98,7 @@ class GIRIL(RewardModel):
         )
 
     @override
-    def setup(self, demos: DemoSet | None) -> None:
-        super().setup(demos)
+    def pretrain(self, demos: DemoSet | None) -> None:
         if demos is None:
             raise ValueError("giril needs demonstrations (demos.path)")
         batch = demos.transitions()
