@@ -102,9 +102,22 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         os.chdir(tmp)
         start = time.perf_counter()
-        qdil_main(["fit", args.recipe, "--qd.iterations", str(args.iterations), "--name", "bench",
-                   "--logging.wandb", "disabled", "--logging.progress", "false",
-                   "--logging.checkpoint_every", str(10**6)])  # fmt: skip
+        qdil_main(
+            [
+                "fit",
+                args.recipe,
+                "--qd.iterations",
+                str(args.iterations),
+                "--name",
+                "bench",
+                "--logging.wandb",
+                "disabled",
+                "--logging.progress",
+                "false",
+                "--logging.checkpoint_every",
+                str(10**6),
+            ]
+        )
         import csv
 
         with open(Path(tmp) / "runs" / "bench" / "metrics.csv", newline="") as file:

@@ -123,9 +123,13 @@ def test_import_from_a_minari_dataset_replays_contacts(walker_demos, tmp_path, m
             )
         )
     with pytest.warns(UserWarning, match="author"):  # minari asks for metadata we skip
-        minari.create_dataset_from_buffers("test/walker2d/qdil-v0", buffer=buffers,
-                                           env=gym.make("Walker2d-v5"), algorithm_name="qdil",
-                                           data_format="hdf5")  # fmt: skip
+        minari.create_dataset_from_buffers(
+            "test/walker2d/qdil-v0",
+            buffer=buffers,
+            env=gym.make("Walker2d-v5"),
+            algorithm_name="qdil",
+            data_format="hdf5",
+        )
     imported = import_minari("test/walker2d/qdil-v0")
     assert imported.task == "Walker2d-v5"
     np.testing.assert_array_equal(imported.contacts, demos.contacts)

@@ -14,71 +14,16 @@ import subprocess
 import sys
 from pathlib import Path
 
-import numpy as np
 import pytest
 import torch
+from _synthetic import ACT, OBS, K, as_rollout, demos_of, synthetic, train
 
-from qdil.data import Rollout, TransitionBatch
-from qdil.demos.dataset import DemoSet
+from qdil.data import TransitionBatch
 from qdil.rewards import registry
 
 REPO = Path(__file__).resolve().parents[2]
 EXAMPLE = REPO / "docs" / "guides" / "example_reward.py"
 NAME = "lsgail"
-OBS, ACT, K = 5, 2, 2
-
-
-def synthetic(center: float, size: int, seed: int) -> TransitionBatch:
-    """Separable transitions around ``center`` (as test_contract.synthetic)."""
-    g = torch.Generator().manual_seed(seed)
-    obs = center + 0.5 * torch.randn(size, OBS, generator=g)
-    actions = (0.4 * np.sign(center) + 0.1 * torch.randn(size, ACT, generator=g)).clamp(-1, 1)
-    contacts = torch.tensor([[1.0, 0.0] if center > 0 else [0.0, 1.0]]).repeat(size, 1)
-    next_obs = center + 0.5 * torch.randn(size, OBS, generator=g)
-    dones = torch.zeros(size)
-    dones[-1] = 1.0
-    return TransitionBatch(
-        obs, actions, contacts, next_obs, contacts.clone(), dones, torch.full((size,), -1.0)
-    )
-
-
-def demos_of(batch: TransitionBatch) -> DemoSet:
-    n = len(batch)
-    return DemoSet(
-        task="Walker2d-v5",
-        obs=batch.obs.double().numpy(),
-        actions=batch.actions.double().numpy(),
-        contacts=batch.contacts.numpy(),
-        rewards=np.zeros(n),
-        next_obs=batch.next_obs.double().numpy(),
-        next_contacts=batch.next_contacts.numpy(),
-        episode_ends=np.array([n // 2, n]),
-        terminated=np.array([True, False]),
-    )
-
-
-def as_rollout(batch: TransitionBatch, envs: int = 1) -> Rollout:
-    """Transitions laid out time-major, (len / envs, envs)."""
-    steps = len(batch) // envs
-
-    def tm(x: torch.Tensor) -> torch.Tensor:
-        return x[: steps * envs].reshape(envs, steps, *x.shape[1:]).transpose(0, 1).contiguous()
-
-    starts = torch.zeros(steps, envs)
-    starts[0] = 1.0
-    return Rollout(
-        obs=tm(batch.obs),
-        actions=tm(batch.actions),
-        contacts=tm(batch.contacts),
-        next_obs=tm(batch.next_obs),
-        next_contacts=tm(batch.next_contacts),
-        rewards=torch.zeros(steps, envs),
-        dones=tm(batch.dones),
-        terminated=tm(batch.dones),
-        log_probs=tm(batch.log_probs),
-        valid=torch.ones(steps, envs),
-        starts=starts,
-    )
 
 
 @pytest.fixture
@@ -114,15 +59,9 @@ def policy() -> TransitionBatch:
 
 
 def trained(expert: TransitionBatch, policy: TransitionBatch, updates: int):
-    """The registered example, set up under Fabric as the QD loop does, after ``updates``."""
-    from lightning import Fabric
-
+    """The registered example, set up as the QD loop does, after ``updates``."""
     torch.manual_seed(0)
-    model = registry.get_reward(NAME)(OBS, ACT, K)
-    Fabric(accelerator="cpu", devices=1).setup(model, model.configure_optimizers())
-    model.setup(demos_of(expert))
-    metrics = [model.update(expert, policy, iteration=i) for i in range(updates)]
-    return model, metrics
+    return train(registry.get_reward(NAME)(OBS, ACT, K), expert, policy, updates)
 
 
 def test_the_example_registers_from_the_local_plugin_folder(plugin_folder) -> None:

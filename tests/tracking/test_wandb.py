@@ -56,10 +56,26 @@ def history(run_file: Path) -> list[dict]:
 def test_offline_wandb_run_contains_metrics_images_and_table(tmp_path: Path) -> None:
     env = {**os.environ, "WANDB_MODE": "offline", "WANDB_SILENT": "true"}
     subprocess.run(
-        [sys.executable, "-m", "qdil.cli", "fit", str(SMOKE), "--name", "wb",
-         "--logging.wandb", "offline", "--logging.heatmap_every", "2"],
-        cwd=tmp_path, env=env, check=True, capture_output=True, text=True, timeout=600,
-    )  # fmt: skip
+        [
+            sys.executable,
+            "-m",
+            "qdil.cli",
+            "fit",
+            str(SMOKE),
+            "--name",
+            "wb",
+            "--logging.wandb",
+            "offline",
+            "--logging.heatmap_every",
+            "2",
+        ],
+        cwd=tmp_path,
+        env=env,
+        check=True,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     folders = list((tmp_path / "runs" / "wb" / "wandb").glob("offline-run-*"))
     assert len(folders) == 1
     run_file = next(folders[0].glob("run-*.wandb"))

@@ -14,6 +14,7 @@ from __future__ import annotations
 from collections.abc import Iterator
 
 import torch
+import torch.nn.functional as F
 from torch.optim import Optimizer
 
 from qdil.data import TransitionBatch
@@ -84,6 +85,37 @@ class AdversarialReward(RewardModel):
         self.manual_backward(loss)
         optimizer.step()
 
+    def classify(
+        self,
+        optimizer: Optimizer,
+        logit_e: torch.Tensor,
+        logit_p: torch.Tensor,
+        gp: torch.Tensor,
+        iteration: int,
+    ) -> dict[str, float]:
+        """One discriminator step: expert labelled 1, policy 0, plus the gradient penalty.
+
+        Args:
+            optimizer: the discriminator's optimiser.
+            logit_e: (B,) logits of expert inputs.
+            logit_p: (B,) logits of policy inputs.
+            gp: the gradient penalty (unweighted).
+            iteration: the QD iteration, for error messages.
+
+        Returns:
+            The step's loss, gradient penalty and accuracies on either side.
+        """
+        loss = F.binary_cross_entropy_with_logits(logit_e, torch.ones_like(logit_e))
+        loss = loss + F.binary_cross_entropy_with_logits(logit_p, torch.zeros_like(logit_p))
+        loss = loss + self.gp_weight * gp
+        self.descend(optimizer, loss, "discriminator loss", iteration)
+        return {
+            "loss": float(loss.detach()),
+            "gp": float(gp.detach()),
+            "expert_acc": float((logit_e > 0).float().mean()),
+            "policy_acc": float((logit_p < 0).float().mean()),
+        }
+
     def minibatches(
         self, expert: TransitionBatch, policy: TransitionBatch
     ) -> Iterator[tuple[TransitionBatch, TransitionBatch]]:
@@ -95,3 +127,8 @@ class AdversarialReward(RewardModel):
             order = torch.randperm(len(expert))
             for start in range(0, len(expert) - size + 1, size):
                 yield expert[order[start : start + size]], policy.sample(size)
+
+
+def average(steps: list[dict[str, float]]) -> dict[str, float]:
+    """Mean of per-step metrics over an update's steps."""
+    return {key: sum(step[key] for step in steps) / len(steps) for key in steps[0]} if steps else {}

@@ -17,11 +17,10 @@ from collections.abc import Sequence
 from typing import Any, Literal
 
 import torch
-import torch.nn.functional as F
 from typing_extensions import override
 
 from qdil.data import TransitionBatch
-from qdil.rewards.adversarial import AdversarialReward
+from qdil.rewards.adversarial import AdversarialReward, average
 from qdil.rewards.nets import gradient_penalty, mlp
 from qdil.rewards.registry import register_reward
 
@@ -95,20 +94,11 @@ class AIRL(AdversarialReward):
             if not torch.isfinite(batch.log_probs).all():
                 raise ValueError(f"airl needs the policy's log-probabilities of the {name} batch")
         optimizer = self.optimizers()
-        sums = {"loss": 0.0, "gp": 0.0, "expert_acc": 0.0, "policy_acc": 0.0}
-        steps = 0
+        steps = []
         for expert_mb, policy_mb in self.minibatches(expert, policy):
             in_e, in_p = self._inputs(expert_mb), self._inputs(policy_mb)
             logit_e = self.f(in_e) - expert_mb.log_probs
             logit_p = self.f(in_p) - policy_mb.log_probs
-            loss = F.binary_cross_entropy_with_logits(logit_e, torch.ones_like(logit_e))
-            loss = loss + F.binary_cross_entropy_with_logits(logit_p, torch.zeros_like(logit_p))
             gp = gradient_penalty(self.f, in_e, in_p) if self.gp_weight else torch.zeros(())
-            loss = loss + self.gp_weight * gp
-            self.descend(optimizer, loss, "discriminator loss", iteration)
-            sums["loss"] += float(loss.detach())
-            sums["gp"] += float(gp.detach())
-            sums["expert_acc"] += float((logit_e > 0).float().mean())
-            sums["policy_acc"] += float((logit_p < 0).float().mean())
-            steps += 1
-        return {key: value / max(steps, 1) for key, value in sums.items()}
+            steps.append(self.classify(optimizer, logit_e, logit_p, gp, iteration))
+        return average(steps)

@@ -15,7 +15,7 @@ import torch
 from typing_extensions import override
 
 from qdil.data import TransitionBatch
-from qdil.rewards.adversarial import AdversarialReward
+from qdil.rewards.adversarial import AdversarialReward, average
 from qdil.rewards.nets import gradient_penalty, mlp
 from qdil.rewards.registry import register_reward
 
@@ -74,20 +74,18 @@ class MaxEntIRL(AdversarialReward):
         self, expert: TransitionBatch, policy: TransitionBatch, iteration: int
     ) -> dict[str, float]:
         optimizer = self.optimizers()
-        sums = {"loss": 0.0, "gp": 0.0, "reward_expert": 0.0, "reward_policy": 0.0}
-        steps = 0
+        steps = []
         for expert_mb, policy_mb in self.minibatches(expert, policy):
             x_e, x_p = self.features(expert_mb), self.features(policy_mb)
             r_e, r_p = self.raw(x_e), self.raw(x_p)
             gp = gradient_penalty(self.raw, x_e, x_p) if self.gp_weight else torch.zeros(())
             loss = r_p.mean() - r_e.mean() + self.gp_weight * gp
             self.descend(optimizer, loss, "reward loss", iteration)
-            for key, value in (
-                ("loss", loss),
-                ("gp", gp),
-                ("reward_expert", r_e.mean()),
-                ("reward_policy", r_p.mean()),
-            ):
-                sums[key] += float(value.detach())
-            steps += 1
-        return {key: value / max(steps, 1) for key, value in sums.items()}
+            values = {
+                "loss": loss,
+                "gp": gp,
+                "reward_expert": r_e.mean(),
+                "reward_policy": r_p.mean(),
+            }
+            steps.append({key: float(value.detach()) for key, value in values.items()})
+        return average(steps)

@@ -30,7 +30,7 @@ import torch.nn.functional as F
 from typing_extensions import override
 
 from qdil.data import TransitionBatch
-from qdil.rewards.adversarial import AdversarialReward
+from qdil.rewards.adversarial import AdversarialReward, average
 from qdil.rewards.nets import gail_reward, gradient_penalty, mlp
 from qdil.rewards.registry import register_reward
 
@@ -119,24 +119,15 @@ class WAEReward(AdversarialReward):
         self, expert: TransitionBatch, policy: TransitionBatch, iteration: int
     ) -> dict[str, float]:
         ae_opt, adversary_opt = self.optimizers()
-        sums = {
-            "adversary_loss": 0.0,
-            "gp": 0.0,
-            "reconstruction": 0.0,
-            "ae_loss": 0.0,
-            "critic_gap": 0.0,
-        }
-        steps = 0
+        steps = []
         for expert_mb, policy_mb in self.minibatches(expert, policy):
             x_e, x_p = self.features(expert_mb), self.features(policy_mb)
             z_e, z_p = self.sample(x_e), self.sample(x_p)
             # ---- latent adversary step on fixed codes
             codes_e, codes_p = z_e.detach(), z_p.detach()
-            gp = (
-                gradient_penalty(self.critic, codes_e, codes_p)
-                if self.gp_weight
-                else torch.zeros(())
-            )
+            gp = torch.zeros(())
+            if self.gp_weight:
+                gp = gradient_penalty(self.critic, codes_e, codes_p)
             adversary_loss = self.adversary_loss(codes_e, codes_p) + self.gp_weight * gp
             self.descend(adversary_opt, adversary_loss, "latent adversary loss", iteration)
             # ---- auto-encoder step
@@ -145,16 +136,15 @@ class WAEReward(AdversarialReward):
             self.descend(ae_opt, ae_loss, "auto-encoder loss", iteration)
             with torch.no_grad():
                 gap = self.critic(codes_e).mean() - self.critic(codes_p).mean()
-            for key, value in (
-                ("adversary_loss", adversary_loss),
-                ("gp", gp),
-                ("ae_loss", ae_loss),
-                ("reconstruction", reconstruction),
-                ("critic_gap", gap),
-            ):
-                sums[key] += float(value.detach())
-            steps += 1
-        return {key: value / max(steps, 1) for key, value in sums.items()}
+            values = {
+                "adversary_loss": adversary_loss,
+                "gp": gp,
+                "ae_loss": ae_loss,
+                "reconstruction": reconstruction,
+                "critic_gap": gap,
+            }
+            steps.append({key: float(value.detach()) for key, value in values.items()})
+        return average(steps)
 
 
 @register_reward("wae_gail")
