@@ -102,6 +102,8 @@ def _load_entry_points() -> None:
             ) from error
         finally:
             _current_source = "qdil (built-in)"
+        source = f"entry point {entry_point.name} ({dist})"
+        module = loaded.__module__ if inspect.isclass(loaded) else loaded.__name__
         if inspect.isclass(loaded):
             if not issubclass(loaded, RewardModel):
                 raise TypeError(
@@ -109,9 +111,13 @@ def _load_entry_points() -> None:
                     "which is not a qdil RewardModel subclass"
                 )
             if loaded.name not in _REGISTRY or _REGISTRY[loaded.name].cls is not loaded:
-                _current_source = f"entry point {entry_point.name} ({dist})"
+                _current_source = source
                 register_reward(loaded.name or entry_point.name)(loaded)
                 _current_source = "qdil (built-in)"
+        # the package may have been imported (and registered) before discovery ran
+        for name, entry in list(_REGISTRY.items()):
+            if entry.cls.__module__ == module and entry.source.startswith("module "):
+                _REGISTRY[name] = RegisteredReward(name, entry.cls, source)
 
 
 def plugin_folders() -> list[Path]:
