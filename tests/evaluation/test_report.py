@@ -52,7 +52,7 @@ def test_summarize_uses_the_sample_std() -> None:
 def test_single_seed_says_so() -> None:
     summary = summarize([3.8e6])
     assert summary == Summary(3.8e6, 0.0, 1)
-    assert format_mean_std(summary, "sci") == "3.80e+06 ±0 (n=1)"
+    assert format_mean_std(summary, "sci") == "3.80e+06 (n=1)"
     assert format_mean_std(summarize([]), "sci") == "–"
 
 
@@ -141,7 +141,7 @@ def test_main_table_rows_and_single_seed_cells() -> None:
     gail = rows[1]
     assert gail[1] == "2" and gail[2] == f"2.00e+06 ± {statistics.stdev([1e6, 3e6]):.2e}"
     assert gail[3] == "50.00 ± 0.00"
-    assert gail[7] == "2.00e+06 ±0 (n=1)"
+    assert gail[7] == "2.00e+06 (n=1)"
     assert rows[0][6] == "–"  # no true-reward run on Hopper
 
 
@@ -342,7 +342,7 @@ def test_unfinished_and_missing_runs_are_reported(made: SimpleNamespace) -> None
     for name in ("giril0", "broken", "lost", "ghost"):
         assert name in section
     table = (made.out / "table.md").read_text()
-    assert "| GIRIL | 1* |" in table and "±0 (n=1)" in table
+    assert "| GIRIL | 1* |" in table and "(n=1)" in table
     assert "broken: left out" in made.stdout and "giril0: included, unfinished" in made.stdout
 
 

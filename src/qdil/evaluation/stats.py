@@ -1,7 +1,7 @@
 """Statistics of a report: mean ± std over seeds, Tukey HSD between methods, aligned curves.
 
 - Spread is the **sample** standard deviation (``ddof=1``) over seeds. With one seed it is
-  undefined; it is reported as ``0`` and the text says ``(n=1)``.
+  undefined: the text shows the mean alone with ``(n=1)`` (the CSV keeps std 0).
 - Tukey's HSD (``scipy.stats.tukey_hsd``) compares every pair of methods of one task on the
   raw QD-Score. It needs at least two methods with at least two seeds each; methods with
   fewer seeds are left out of the test and named in a note.
@@ -75,7 +75,7 @@ def format_number(value: float, style: str) -> str:
 
 
 def format_mean_std(summary: Summary, style: str) -> str:
-    """``mean ± std`` text of a summary; a single seed reads ``mean ±0 (n=1)``.
+    """``mean ± std`` text of a summary; a single seed reads ``mean (n=1)``, no spread.
 
     Args:
         summary: the summary.
@@ -85,7 +85,7 @@ def format_mean_std(summary: Summary, style: str) -> str:
         return "–"
     mean = format_number(summary.mean, style)
     if summary.n == 1:
-        return f"{mean} ±0 (n=1)"
+        return f"{mean} (n=1)"
     return f"{mean} ± {format_number(summary.std, style)}"
 
 
