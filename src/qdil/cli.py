@@ -13,8 +13,10 @@
 from __future__ import annotations
 
 import argparse
+import shutil
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import yaml
 from jsonargparse import ActionConfigFile, ArgumentParser, Namespace, lazy_instance
@@ -28,6 +30,9 @@ from qdil.config import (
     RewardFactory,
 )
 from qdil.rl.vppo import VPPO
+
+if TYPE_CHECKING:
+    from qdil.run import Run
 
 CONFIG_NAME = "config.yaml"
 
@@ -153,7 +158,6 @@ def fit(argv: list[str]) -> None:
     """``qdil fit``: build the run, save its resolved recipe, loop, checkpoint."""
     from qdil.qd.checkpoint import atomic_write, load_checkpoint
     from qdil.qd.loop import run_qd
-    from qdil.run import build_run
 
     config, resume_dir, stem = parse_fit(argv)
     parser = fit_parser()
@@ -169,10 +173,30 @@ def fit(argv: list[str]) -> None:
             )
     config.name = name
     resolved = parser.dump(config, skip_none=False)
+    fresh = not run_dir.exists()
     run_dir.mkdir(parents=True, exist_ok=True)
-    atomic_write(run_dir / CONFIG_NAME, lambda file: file.write(resolved.encode()))
-    init = parser.instantiate(config)
-    run = build_run(
+    try:
+        atomic_write(run_dir / CONFIG_NAME, lambda file: file.write(resolved.encode()))
+        init = parser.instantiate(config)
+        run = _build(init, name, run_dir, resolved, resume=resume_dir is not None)
+    except BaseException:
+        if fresh:  # a run that never started leaves no directory behind
+            shutil.rmtree(run_dir, ignore_errors=True)
+        raise
+    if resume_dir is not None:
+        load_checkpoint(run)
+        run.tracker.csv.truncate(run.state.iteration)
+        print(f"resuming {run_dir} at iteration {run.state.iteration}", file=sys.stderr)
+    run_qd(run)
+    run.tracker.finish(run)
+    print(f"run directory: {run_dir}", file=sys.stderr)
+
+
+def _build(init: Namespace, name: str, run_dir: Path, resolved: str, *, resume: bool) -> Run:
+    """The run of an instantiated recipe (envs, reward model, scheduler, trackers)."""
+    from qdil.run import build_run
+
+    return build_run(
         name=name,
         run_dir=run_dir,
         seed=init.seed,
@@ -184,15 +208,8 @@ def fit(argv: list[str]) -> None:
         qd=init.qd,
         logging=init.logging,
         config=yaml.safe_load(resolved),
-        resume=resume_dir is not None,
+        resume=resume,
     )
-    if resume_dir is not None:
-        load_checkpoint(run)
-        run.tracker.csv.truncate(run.state.iteration)
-        print(f"resuming {run_dir} at iteration {run.state.iteration}", file=sys.stderr)
-    run_qd(run)
-    run.tracker.finish(run)
-    print(f"run directory: {run_dir}", file=sys.stderr)
 
 
 def rewards(argv: list[str]) -> None:

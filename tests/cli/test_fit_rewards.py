@@ -86,3 +86,12 @@ def test_demos_of_another_task_are_refused(walker_demos: Path, tmp_path: Path, m
                 "y",
             ]
         )
+
+
+def test_a_missing_demo_file_says_how_to_make_one_and_leaves_no_run(
+    tmp_path: Path, monkeypatch
+) -> None:
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(SystemExit, match=r"humanoid\.npz: no such file .*qdil demos RUN_DIR"):
+        main(["fit", str(RECIPE), "--demos.path", "humanoid.npz", "--name", "z"])
+    assert not (tmp_path / "runs" / "z").exists()

@@ -101,8 +101,11 @@ def resolve_path(path: str | Path) -> Path:
     shipped = shipped_demos()
     if str(path) in shipped:
         return shipped[str(path)]
-    hint = f"; shipped sets: {', '.join(sorted(shipped))}" if shipped else ""
-    raise DemoFormatError(f"demonstrations {path}: no such file{hint}")
+    names = f"shipped sets: {', '.join(sorted(shipped))}; " if shipped else ""
+    raise DemoFormatError(
+        f"demonstrations {path}: no such file ({names}make a set from an expert run with "
+        "`qdil demos RUN_DIR --out FILE`, see docs/concepts/demonstrations.md)"
+    )
 
 
 def save_demos(
