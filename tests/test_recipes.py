@@ -53,3 +53,23 @@ def test_recipe_parses_and_instantiates(recipe: Path) -> None:
     if "paper" in recipe.parts:
         assert init.qd.iterations == 2000
         assert init.env.num_envs == 3000
+
+
+@pytest.mark.parametrize("task", ["walker", "halfcheetah"])
+def test_imitation_recipes_read_a_shipped_set_of_their_task(task: str) -> None:
+    from qdil.demos.io import load_demos
+
+    for recipe in (ROOT / "recipes").rglob(f"{task}_*.yaml"):
+        config, _, _ = parse_fit([str(recipe)])
+        if config.demos.path is None:
+            continue
+        demos = load_demos(config.demos.path, task=config.env.task)
+        assert demos.num_episodes == 4, recipe
+
+
+def test_humanoid_recipes_name_the_file_their_header_tells_how_to_make() -> None:
+    for recipe in (ROOT / "recipes").rglob("humanoid_*.yaml"):
+        config, _, _ = parse_fit([str(recipe)])
+        if config.demos.path is not None:
+            assert config.demos.path == "humanoid.npz"
+            assert "qdil demos runs/humanoid_ppga-seed0 --out humanoid.npz" in recipe.read_text()
