@@ -97,3 +97,14 @@ def test_disabled_mode_refuses_to_step_finished_envs() -> None:
     env.step(np.zeros((2, 6)))
     with pytest.raises(RuntimeError, match="reset them with reset"):
         env.step(np.zeros((2, 6)))
+
+
+def test_halfcheetah_loads_leave_no_mujoco_log(tmp_path, monkeypatch) -> None:
+    # MuJoCo's default handler appends half_cheetah.xml's deprecation to ./MUJOCO_LOG.TXT.
+    from qdil.demos.io import TaskShape
+
+    monkeypatch.chdir(tmp_path)
+    assert TaskShape.of("HalfCheetah-v5").obs_dim == 17
+    with pytest.warns(UserWarning, match="MuJoCo: .*settotalmass"):
+        gym.make("qdil/HalfCheetah-v5").close()
+    assert not (tmp_path / "MUJOCO_LOG.TXT").exists()

@@ -13,11 +13,11 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-import gymnasium
 import numpy as np
 
 from qdil.demos.dataset import DemoSet
 from qdil.demos.io import DemoFormatError, TaskShape
+from qdil.envs import make_gymnasium_env
 from qdil.envs.contacts import ContactProbe
 from qdil.envs.tasks import TASKS
 
@@ -33,7 +33,7 @@ _SKIPPED_QPOS = {
 
 def qpos_from_obs(task: str, obs: np.ndarray) -> np.ndarray:
     """(T, nq) positions from (T, obs_dim) v5 observations, excluded root coordinates = 0."""
-    env = gymnasium.make(TASKS[task].gym_id).unwrapped
+    env = make_gymnasium_env(TASKS[task].gym_id, quiet=True).unwrapped
     nq = env.model.nq
     skipped = _SKIPPED_QPOS[task]
     obs = np.atleast_2d(obs)
@@ -44,7 +44,7 @@ def qpos_from_obs(task: str, obs: np.ndarray) -> np.ndarray:
 
 def replay_contacts(task: str, obs: np.ndarray) -> np.ndarray:
     """(T, k) foot-contact flags δ(s) of observations ``obs`` (T, obs_dim)."""
-    env = gymnasium.make(TASKS[task].gym_id).unwrapped
+    env = make_gymnasium_env(TASKS[task].gym_id, quiet=True).unwrapped
     probe = ContactProbe(env.model, TASKS[task].feet, TASKS[task].floor)
     return probe.batch(qpos_from_obs(task, obs))
 

@@ -68,12 +68,11 @@ class TaskShape:
     @classmethod
     def of(cls, task: str) -> TaskShape:
         """The sizes of a gymnasium task id such as ``"Walker2d-v5"``."""
-        import gymnasium
-
+        from qdil.envs import make_gymnasium_env
         from qdil.envs.tasks import TASKS, make_task
 
         make_task(task)  # validates the name
-        env = gymnasium.make(TASKS[task].gym_id)
+        env = make_gymnasium_env(TASKS[task].gym_id, quiet=True)
         return cls(
             task=task,
             obs_dim=int(env.observation_space.shape[0]),

@@ -12,6 +12,7 @@ environment is gymnasium's own class wrapped by :class:`FootContacts`.
 
 from __future__ import annotations
 
+import warnings
 from typing import Any
 
 import gymnasium
@@ -44,8 +45,35 @@ def make_single_env(task: str = "Walker2d-v5", **kwargs: Any) -> gymnasium.Env:
 
     cls = TASKS[task]
     make_task(task, **{k: v for k, v in kwargs.items() if k != "render_mode"})  # validates
-    env = gymnasium.make(cls.gym_id, max_episode_steps=-1, disable_env_checker=True, **kwargs)
+    env = make_gymnasium_env(cls.gym_id, max_episode_steps=-1, disable_env_checker=True, **kwargs)
     return FootContacts(env.unwrapped, cls.feet, cls.floor)
+
+
+def make_gymnasium_env(gym_id: str, *, quiet: bool = False, **kwargs: Any) -> gymnasium.Env:
+    """``gymnasium.make(gym_id, **kwargs)`` with MuJoCo's compiler warnings as Python warnings.
+
+    MuJoCo's default warning handler appends to ``MUJOCO_LOG.TXT`` in the working directory
+    (half_cheetah.xml's deprecated ``settotalmass`` triggers it on every load), which would
+    litter the user's folder. The handler is replaced only while the model loads.
+
+    Args:
+        gym_id: a gymnasium task id such as ``"HalfCheetah-v5"``.
+        quiet: drop the warnings instead, for internal uses (sizes, contact replay) where
+            a warning about gymnasium's own model file would only be noise.
+        **kwargs: passed to ``gymnasium.make``.
+    """
+    import mujoco
+
+    messages: list[str] = []
+    previous = mujoco.get_mju_user_warning()
+    mujoco.set_mju_user_warning(messages.append)  # nothing may raise inside MuJoCo's C code
+    try:
+        env = gymnasium.make(gym_id, **kwargs)
+    finally:
+        mujoco.set_mju_user_warning(previous)
+    for message in [] if quiet else messages:
+        warnings.warn(f"MuJoCo: {message}", UserWarning, stacklevel=2)
+    return env
 
 
 def register_envs() -> None:
