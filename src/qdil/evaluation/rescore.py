@@ -14,7 +14,6 @@ with 1,000 elites of 1,000-step episodes and 5 episodes each that is 5 M steps, 
 from __future__ import annotations
 
 import json
-import pickle
 from pathlib import Path
 from typing import Any
 
@@ -25,7 +24,7 @@ from ribs.archives import GridArchive
 
 from qdil.envs.vector import LocomotionVectorEnv
 from qdil.qd.archives import QD_OFFSETS, elite_fields, make_grid, qd_metrics
-from qdil.qd.checkpoint import atomic_write, load_archive
+from qdil.qd.checkpoint import atomic_write, dumps_compact, load_archive
 from qdil.rl.collect import evaluate_policies
 from qdil.rl.networks import VectorizedActor
 from qdil.rl.normalize import RunningMeanStd
@@ -123,8 +122,6 @@ def rescore_archive(
         "metrics": metrics,
         "training_metrics": qd_metrics(archive, QD_OFFSETS.get(env_cfg["task"], 0.0)),
     }
-    atomic_write(
-        run_dir / CORRECTED, lambda f: pickle.dump(corrected, f, protocol=pickle.HIGHEST_PROTOCOL)
-    )
+    atomic_write(run_dir / CORRECTED, lambda f: f.write(dumps_compact(corrected)))
     atomic_write(run_dir / EVAL_JSON, lambda f: f.write(json.dumps(summary, indent=1).encode()))
     return corrected, summary
