@@ -172,7 +172,7 @@ def fit(argv: list[str]) -> None:
                 f"`qdil fit --resume {run_dir}` or choose another --name"
             )
     config.name = name
-    resolved = parser.dump(config, skip_none=False)
+    resolved = parser.dump(config, skip_unset=False)
     fresh = not run_dir.exists()
     run_dir.mkdir(parents=True, exist_ok=True)
     try:
