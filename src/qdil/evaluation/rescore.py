@@ -6,9 +6,9 @@ are noisy. The corrected archive re-plays every elite of the true-return archive
 and inserts it at its re-measured cell into a fresh archive; when two elites land in one
 cell the better one stays.
 
-Cost: elites × episodes × mean episode length env steps; for a 50×50 Walker2d archive
-with 1,000 elites of 1,000-step episodes and 5 episodes each that is 5 M steps, about
-8 minutes at 10 k env-steps/s on 2 cores.
+Cost: elites × episodes × mean episode length env steps. Measured on 2 cores: the 1,280
+elites of a 180-iteration Walker2d run, one episode each, 704,579 env steps in 1 min 56 s
+(about 6,900 env-steps/s with loading); the time grows linearly with ``episodes``.
 """
 
 from __future__ import annotations
