@@ -138,3 +138,22 @@ def test_gradient_penalty_is_zero_for_a_unit_norm_linear_critic() -> None:
     assert penalty.item() == pytest.approx(0.0, abs=1e-10)
     doubled = gradient_penalty(lambda x: x @ (2 * w), torch.randn(16, 2), torch.randn(16, 2))
     assert doubled.item() == pytest.approx(1.0, abs=1e-6)
+
+
+def test_bonus_equals_the_step_by_step_loop_on_random_rollouts() -> None:
+    g = torch.Generator().manual_seed(0)
+    bonus = ExplorationBonus(_Base())
+    counts = torch.ones(4, dtype=torch.float64)
+    for _ in range(3):
+        contacts = (torch.rand(50, 7, 2, generator=g) > 0.3).float()
+        rollout = rollout_of(contacts)
+        valid = (torch.rand(50, 7, generator=g) > 0.2).float()
+        rollout = Rollout(**{**rollout.__dict__, "valid": valid})
+        cells = bonus.cell(contacts)
+        expected = torch.zeros(50, 7, dtype=torch.float64)
+        for t in range(50):  # the paper's definition, one step at a time
+            expected[t] = 1.0 / (1.0 + counts[cells[t]] / counts.sum())
+            counts.index_add_(0, cells[t][valid[t] > 0], torch.ones(int(valid[t].sum())).double())
+        rewards = bonus.predict_reward(rollout, update=True)
+        torch.testing.assert_close(rewards, expected.float(), rtol=0, atol=0)
+        torch.testing.assert_close(bonus.counts, counts, rtol=0, atol=0)

@@ -69,7 +69,34 @@ def fields_from_stats(stats: RunningMeanStd, lengths: np.ndarray) -> dict[str, n
     }
 
 
-def reward_functions(run: Run) -> tuple[Any, Any]:
+class TrainReward:
+    """The per-step rewards VPPO trains on, with a finiteness check and their mean per step.
+
+    Args:
+        run: the run whose reward model scores the rollouts.
+    """
+
+    def __init__(self, run: Run) -> None:
+        self.run = run
+        self.total = 0.0
+        self.steps = 0
+
+    def __call__(self, rollout: Rollout) -> torch.Tensor:
+        """(T, N) rewards of a training rollout (visits count toward the bonus)."""
+        rewards = self.run.reward.predict_reward(rollout, update=True)
+        self.run.reward.check_finite(rewards, "rewards", self.run.state.iteration)
+        valid = rollout.valid > 0
+        self.total += float(rewards[valid].sum())
+        self.steps += int(valid.sum())
+        return rewards
+
+    @property
+    def per_step(self) -> float:
+        """Mean reward per valid training step so far (NaN before any rollout)."""
+        return self.total / self.steps if self.steps else float("nan")
+
+
+def reward_functions(run: Run) -> tuple[TrainReward, Any]:
     """The rewards VPPO trains on and the evaluation's objective, with finiteness checks."""
     reward = run.reward
 
@@ -77,8 +104,7 @@ def reward_functions(run: Run) -> tuple[Any, Any]:
         reward.check_finite(rewards, "rewards", run.state.iteration)
         return rewards
 
-    def train_reward(rollout: Rollout) -> torch.Tensor:
-        return checked(reward.predict_reward(rollout, update=True))
+    train_reward = TrainReward(run)
 
     def eval_reward(rollout: Rollout) -> torch.Tensor:
         return checked(reward.predict_reward(rollout))
@@ -180,6 +206,10 @@ def qd_iteration(run: Run) -> dict[str, float]:
     if returns:
         metrics["rl/train_episode_return"] = float(np.mean(returns))
     metrics |= {f"reward/{k}": float(v) for k, v in reward_metrics.items()}
+    if not run.reward.is_true_reward:
+        # what RL is handed per step; the bonus wrapper splits it into learned and bonus
+        metrics["reward/train_per_step"] = train_reward.per_step
+        metrics.setdefault("reward/learned_per_step", train_reward.per_step)
     metrics |= {
         "search/objective": float(_objective(run, mean_eval)[0]),
         "search/true_objective": float(mean_eval.true_objective[0]),

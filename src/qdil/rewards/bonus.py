@@ -46,6 +46,8 @@ class ExplorationBonus(RewardModel):
         self.register_buffer(
             "counts", torch.ones(per_measure**model.num_measures, dtype=torch.float64)
         )
+        # sums over this iteration's valid training steps: learned reward, bonus, steps
+        self._balance = torch.zeros(3, dtype=torch.float64)
         self.name = f"{model.name}+bonus" if model.name else "bonus"
         self.learned = model.learned
         self.needs_demos = model.needs_demos
@@ -65,16 +67,23 @@ class ExplorationBonus(RewardModel):
         return (digits * powers).sum(-1)
 
     def bonus(self, rollout: Rollout, update: bool) -> torch.Tensor:
-        """(T, N) r_exp of δ(s_t), counting the valid steps' visits if ``update``."""
-        cells = self.cell(rollout.contacts)
-        out = torch.zeros(rollout.rewards.shape, dtype=torch.float64)
-        for t in range(rollout.num_steps):
-            p = self.counts[cells[t]] / self.counts.sum()
-            out[t] = 1.0 / (1.0 + p)
-            if update:
-                visits = cells[t][rollout.valid[t] > 0]
-                self.counts.index_add_(0, visits, torch.ones(len(visits), dtype=torch.float64))
-        return out.float()
+        """(T, N) r_exp of δ(s_t), counting the valid steps' visits if ``update``.
+
+        Step t sees the counts before step t's visits are added. Rather than a Python loop
+        over steps, the counts seen at every step are an exclusive cumulative sum of the
+        per-step visits (T, cells): whole numbers in float64, so the result equals the
+        step-by-step loop exactly.
+        """
+        cells = self.cell(rollout.contacts)  # (T, N)
+        counts = self.counts.expand(rollout.num_steps, -1)  # (T, cells)
+        if update:
+            visits = torch.zeros(counts.shape, dtype=torch.float64)
+            visits.scatter_add_(1, cells, (rollout.valid > 0).to(torch.float64))
+            seen = visits.cumsum(0)
+            counts = counts + torch.cat([torch.zeros_like(seen[:1]), seen[:-1]])
+            self.counts += seen[-1]
+        p = counts.gather(1, cells) / counts.sum(1, keepdim=True)
+        return (1.0 / (1.0 + p)).float()
 
     @override
     def setup(self, demos: DemoSet | None) -> None:
@@ -98,8 +107,13 @@ class ExplorationBonus(RewardModel):
     ) -> dict[str, float]:
         metrics = self.model.update(expert, policy, iteration)
         share = self.counts / self.counts.sum()
+        learned, bonus, steps = self._balance.tolist()
+        self._balance.zero_()
+        steps = max(steps, 1.0)
         return {
             **metrics,
+            "learned_per_step": learned / steps,
+            "bonus_per_step": bonus / steps,
             "bonus_min_share": float(share.min()),
             "bonus_max_share": float(share.max()),
         }
@@ -108,7 +122,14 @@ class ExplorationBonus(RewardModel):
     @torch.no_grad()
     def predict_reward(self, rollout: Rollout, *, update: bool = False) -> torch.Tensor:
         base = self.model.predict_reward(rollout, update=update)
-        return base + self.weight * self.bonus(rollout, update)
+        bonus = self.weight * self.bonus(rollout, update)
+        if update:  # the balance a user watches: learned reward and bonus per training step
+            valid = rollout.valid > 0
+            self._balance += torch.tensor(
+                [float(base[valid].sum()), float(bonus[valid].sum()), float(valid.sum())],
+                dtype=torch.float64,
+            )
+        return base + bonus
 
     @override
     def extra_state(self) -> dict[str, Any]:
