@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import math
 from pathlib import Path
 
 import pytest
@@ -19,7 +20,7 @@ FAMILIES = {
     "pwil": [],
     "giril": ["--reward.pretrain_epochs", "2"],
     "wae_gail": [],
-    "mcwae_wgail": ["--bonus.enabled", "true"],
+    "mcwae_wgail": ["--bonus.enabled", "true", "--reward.reward_type", "calibrated"],
 }
 try:  # the example plugin package, installed by the README's test command
     import qdil_vail  # noqa: F401
@@ -59,6 +60,17 @@ def test_fit_runs_each_reward_family(
         assert any(key.startswith("reward/") for key in last), "online models log their update"
     if reward == "mcwae_wgail":
         assert "reward/bonus_max_share" in last
+        # the balance of what RL is handed: learned part + bonus part = the whole, per step
+        learned, bonus = (
+            float(last["reward/learned_per_step"]),
+            float(last["reward/bonus_per_step"]),
+        )
+        assert 0.5 <= bonus < 1.0  # weight 1 × r_exp ∈ [1/2, 1)
+        assert learned + bonus == pytest.approx(float(last["reward/train_per_step"]), rel=1e-4)
+        anchors = float(last["reward/critic_expert"]), float(last["reward/critic_policy"])
+        assert all(math.isfinite(a) for a in anchors)  # the calibration's μ_e and μ_π
+    else:
+        assert last["reward/learned_per_step"] == last["reward/train_per_step"]
 
 
 def test_imitation_without_demos_is_refused(tmp_path: Path, monkeypatch) -> None:

@@ -16,8 +16,13 @@ appendix algorithms, with n the minibatch size and f_c(x, y) = ‖x − y‖²):
 
 Reward (decision D6): r = −log(1 − σ(D(z̄)) + 1e-8) at the encoder mean z̄ = E[Q_φ(z | x)],
 the GAIL form the paper routes every reward through; ``reward_type`` offers the raw critic
-value and σ(D(z̄)). Unspecified by the paper, chosen here and documented: encoder, decoder
-and adversary widths (100, 100), latent size 8, a Gaussian encoder.
+value and σ(D(z̄)). A Wasserstein critic is not a calibrated logit (its expert–policy gap
+grows and its offset drifts), so ``calibrated`` first maps it onto one: after every update
+the critic's means on the expert (μ_e) and on the iteration's policy data (μ_π) fix the
+logit ℓ = 4·(D − (μ_e + μ_π)/2) / max(μ_e − μ_π, min_gap), which puts the expert's mean
+at ℓ = +2 (r ≈ 2.13) and the policy's at ℓ = −2 (r ≈ 0.13) whatever the critic's scale
+(see :func:`calibrated_logit`). Unspecified by the paper, chosen here and documented:
+encoder, decoder and adversary widths (100, 100), latent size 8, a Gaussian encoder.
 """
 
 from __future__ import annotations
@@ -34,6 +39,31 @@ from qdil.rewards.adversarial import AdversarialReward, average
 from qdil.rewards.nets import gail_reward, gradient_penalty, mlp
 from qdil.rewards.registry import register_reward
 
+CALIBRATION_LOGIT = 2.0
+"""|ℓ| of the expert's and the policy's mean critic values under ``calibrated``."""
+
+
+def calibrated_logit(
+    score: torch.Tensor, expert_mean: float, policy_mean: float, min_gap: float
+) -> torch.Tensor:
+    """Map critic values onto a logit fixed by the critic's expert and policy means.
+
+    ℓ = 2·CALIBRATION_LOGIT·(D − (μ_e + μ_π)/2) / max(μ_e − μ_π, min_gap): μ_e maps to
+    +CALIBRATION_LOGIT, μ_π to −CALIBRATION_LOGIT, the midpoint to 0. A critic that no longer
+    separates the two (gap below ``min_gap``) gives flatter logits instead of amplified noise.
+
+    Args:
+        score: (B,) critic values D(z̄).
+        expert_mean: μ_e, the critic's mean on expert inputs.
+        policy_mean: μ_π, the critic's mean on policy inputs.
+        min_gap: smallest gap used as the scale (> 0).
+
+    Returns:
+        (B,) logits.
+    """
+    gap = max(expert_mean - policy_mean, min_gap)
+    return 2.0 * CALIBRATION_LOGIT * (score - 0.5 * (expert_mean + policy_mean)) / gap
+
 
 class WAEReward(AdversarialReward):
     """Shared machinery of the WAE reward models (not registered itself).
@@ -45,8 +75,12 @@ class WAEReward(AdversarialReward):
         latent_dim: size of z.
         hidden: widths of encoder, decoder and latent adversary (the paper: (100, 100)).
         regularization: λ (the paper: 1).
-        reward_type: ``gail`` (−log(1 − σ(D(z̄)) + 1e-8), default), ``critic`` (D(z̄)) or
-            ``sigmoid`` (σ(D(z̄))).
+        reward_type: ``gail`` (−log(1 − σ(D(z̄)) + 1e-8), default), ``calibrated`` (the
+            GAIL form of :func:`calibrated_logit`), ``critic`` (D(z̄)) or ``sigmoid``
+            (σ(D(z̄))).
+        min_gap: smallest expert–policy critic gap that ``calibrated`` divides by.
+        calibration_samples: policy transitions (at most) the calibration scores after
+            each update; all expert transitions are scored.
         **kwargs: :class:`~qdil.rewards.adversarial.AdversarialReward` options.
     """
 
@@ -59,13 +93,30 @@ class WAEReward(AdversarialReward):
         latent_dim: int = 8,
         hidden: Sequence[int] = (100, 100),
         regularization: float = 1.0,
-        reward_type: Literal["gail", "critic", "sigmoid"] = "gail",
+        reward_type: Literal["gail", "calibrated", "critic", "sigmoid"] = "gail",
+        min_gap: float = 1.0,
+        calibration_samples: int = 8192,
         **kwargs: Any,
     ) -> None:
         super().__init__(obs_dim, action_dim, num_measures, **kwargs)
+        if min_gap <= 0:
+            raise ValueError(f"{type(self).__name__}: min_gap must be > 0, got {min_gap}")
+        if calibration_samples < 1:
+            raise ValueError(
+                f"{type(self).__name__}: calibration_samples must be positive, "
+                f"got {calibration_samples}"
+            )
         self.latent_dim = latent_dim
         self.regularization = regularization
         self.reward_type = reward_type
+        self.min_gap = min_gap
+        self.calibration_samples = calibration_samples
+        # μ_e and μ_π of the last update (checkpointed); the initial pair (+2, −2) makes
+        # ℓ = D before the first update, the untrained critic's own value
+        self.register_buffer(
+            "critic_means",
+            torch.tensor([CALIBRATION_LOGIT, -CALIBRATION_LOGIT], dtype=torch.float64),
+        )
         self.encoder = mlp(self.input_dim, hidden, 2 * latent_dim)
         self.decoder = mlp(latent_dim, hidden, self.input_dim)
         self.adversary = mlp(latent_dim, hidden, 1)
@@ -104,7 +155,34 @@ class WAEReward(AdversarialReward):
             return score
         if self.reward_type == "sigmoid":
             return torch.sigmoid(score)
+        if self.reward_type == "calibrated":
+            expert_mean, policy_mean = self.critic_means.tolist()
+            score = calibrated_logit(score, expert_mean, policy_mean, self.min_gap)
         return gail_reward(score)
+
+    @torch.no_grad()
+    def calibrate(self, expert: TransitionBatch, policy: TransitionBatch) -> dict[str, float]:
+        """Store the critic's means on expert and policy inputs (at z̄) for ``calibrated``.
+
+        Args:
+            expert: every expert transition.
+            policy: the iteration's policy transitions (a random subset is scored).
+
+        Returns:
+            μ_e, μ_π and the mean calibrated reward on either side, to log.
+        """
+        if len(policy) > self.calibration_samples:
+            policy = policy[torch.randperm(len(policy))[: self.calibration_samples]]
+        means = []
+        for batch in (expert, policy):
+            codes, _ = self.encode(self.features(batch))
+            means.append(float(self.critic(codes).mean()))
+        self.critic_means.copy_(torch.tensor(means, dtype=torch.float64))
+        metrics = {"critic_expert": means[0], "critic_policy": means[1]}
+        if self.reward_type == "calibrated":
+            metrics["reward_expert"] = float(self.reward(expert).mean())
+            metrics["reward_policy"] = float(self.reward(policy).mean())
+        return metrics
 
     def adversary_loss(self, z_e: torch.Tensor, z_p: torch.Tensor) -> torch.Tensor:
         """The latent adversary's loss (to descend), without the gradient penalty."""
@@ -144,7 +222,7 @@ class WAEReward(AdversarialReward):
                 "critic_gap": gap,
             }
             steps.append({key: float(value.detach()) for key, value in values.items()})
-        return average(steps)
+        return average(steps) | self.calibrate(expert, policy)
 
 
 @register_reward("wae_gail")
