@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -49,6 +49,8 @@ class Run:
     expert: TransitionBatch | None
     state: LoopState
     tracker: Tracker
+    config: dict[str, Any] = field(default_factory=dict)
+    """The resolved recipe; checkpoints store it so a resume can tell an edited config.yaml."""
 
 
 def _seeds(seed: int, count: int) -> list[int]:
@@ -205,4 +207,5 @@ def build_run(
         expert=expert,
         state=LoopState(rng=np.random.default_rng(loop_seed)),
         tracker=tracker,
+        config=config,
     )

@@ -8,7 +8,14 @@ state, and the loop's counters and seed stream. Archives are pickled compactly: 
 policies of ~15 k parameters whether or not the cells are occupied), so only the occupied
 rows are written and the full arrays are rebuilt on load. It is written to a temporary file in the
 same folder, flushed to disk and renamed over ``checkpoints/last.pt``, so a crash at any
-moment leaves either the previous checkpoint or the new one, never half of one.
+moment leaves either the previous checkpoint or the new one, never half of one; the
+temporary file of a killed write is removed when the run starts or resumes
+(:func:`remove_stale_temporaries`).
+
+A checkpoint also stores the run's resolved recipe (``config``), so that a resume whose
+``config.yaml`` was edited since is refused, naming the keys that differ
+(:func:`config_differences`). Checkpoints written before it was stored have no ``config``
+and are resumed without the comparison.
 """
 
 from __future__ import annotations
@@ -16,6 +23,7 @@ from __future__ import annotations
 import io
 import os
 import pickle
+import re
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -28,6 +36,11 @@ if TYPE_CHECKING:
 
 FORMAT_VERSION = 1
 CHECKPOINT = Path("checkpoints") / "last.pt"
+# Recipe keys a resume may change: they set how long the run goes on and what it writes,
+# not what it computes (physics threads change speed only).
+RESUMABLE_KEYS = ("qd.iterations", "env.num_threads", "logging")
+# atomic_write's temporary files: ".<name>.tmp-<pid>"
+_TEMPORARY = re.compile(r"^\..+\.tmp-(\d+)$")
 
 
 class CheckpointError(RuntimeError):
@@ -37,7 +50,7 @@ class CheckpointError(RuntimeError):
 def atomic_write(path: Path, write: Any) -> None:
     """Call ``write(file)`` on a temporary file, fsync it, then rename it over ``path``."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")  # see remove_stale_temporaries
     try:
         with open(tmp, "wb") as file:
             write(file)
@@ -52,6 +65,86 @@ def atomic_write(path: Path, write: Any) -> None:
         os.fsync(directory)
     finally:
         os.close(directory)
+
+
+def _alive(pid: int) -> bool:
+    """Whether process ``pid`` exists (it may be another user's)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    except (OverflowError, ValueError):  # not a possible pid
+        return False
+    return True
+
+
+def remove_stale_temporaries(run_dir: Path) -> list[Path]:
+    """Delete the temporary files that killed :func:`atomic_write` calls left in a run.
+
+    A write killed before its rename leaves ``.<name>.tmp-<pid>`` behind (for a checkpoint,
+    as large as the checkpoint). Files of a process that still runs are kept: another qdil
+    may be writing them right now.
+
+    Args:
+        run_dir: the run directory; it and its ``checkpoints`` folder are cleaned.
+
+    Returns:
+        The files removed.
+    """
+    removed = []
+    for folder in (run_dir, run_dir / CHECKPOINT.parent):
+        if not folder.is_dir():
+            continue
+        for path in folder.iterdir():
+            match = _TEMPORARY.match(path.name)
+            if match is None or not path.is_file():
+                continue
+            pid = int(match.group(1))
+            if pid != os.getpid() and _alive(pid):
+                continue
+            path.unlink(missing_ok=True)
+            removed.append(path)
+    return removed
+
+
+def _flatten(value: Any, prefix: str = "") -> dict[str, Any]:
+    """A nested mapping as ``{"a.b.c": leaf}`` (lists are leaves)."""
+    if not isinstance(value, dict) or (prefix and not value):
+        return {prefix: value}
+    flat: dict[str, Any] = {}
+    for key, item in value.items():
+        flat |= _flatten(item, f"{prefix}.{key}" if prefix else str(key))
+    return flat
+
+
+def config_differences(
+    stored: dict[str, Any], current: dict[str, Any], allowed: tuple[str, ...] = RESUMABLE_KEYS
+) -> list[str]:
+    """The recipe keys whose values differ between a checkpoint's config and the current one.
+
+    Args:
+        stored: the resolved recipe stored with the checkpoint.
+        current: the resolved recipe the resume would run.
+        allowed: keys (and sections) a resume may change; they are not compared.
+
+    Returns:
+        ``"key: stored -> current"`` for every differing key, sorted by key.
+    """
+    old, new = _flatten(stored), _flatten(current)
+
+    def compared(key: str) -> bool:
+        return not any(key == name or key.startswith(f"{name}.") for name in allowed)
+
+    def show(flat: dict[str, Any], key: str) -> str:
+        return repr(flat[key]) if key in flat else "(absent)"
+
+    return [
+        f"{key}: {show(old, key)} -> {show(new, key)}"
+        for key in sorted(set(old) | set(new))
+        if compared(key) and (key not in old or key not in new or old[key] != new[key])
+    ]
 
 
 def _expand_store(state: dict[str, Any]) -> ArrayStore:
@@ -120,6 +213,7 @@ def save_checkpoint(run: Run) -> Path:
             "optimizers": [opt.state_dict() for opt in run.reward_optimizers],
             "extra": reward.extra_state(),
         },
+        "config": run.config,  # compared with config.yaml on resume
     }
     path = run.run_dir / CHECKPOINT
     # torch.save's default protocol 2 stores bytes as latin-1 text, a quarter larger.
@@ -129,24 +223,40 @@ def save_checkpoint(run: Run) -> Path:
     return path
 
 
-def load_checkpoint(run: Run) -> None:
-    """Restore :func:`save_checkpoint`'s state into a freshly built run of the same config.
+def read_checkpoint(path: Path) -> dict[str, Any]:
+    """The state :func:`save_checkpoint` wrote to ``path``.
 
     Raises:
-        CheckpointError: if the file is missing, unreadable, of another format version, or
-            was written by a run of another task or reward model.
+        CheckpointError: if the file is missing, unreadable or of another format version.
     """
-    path = run.run_dir / CHECKPOINT
     if not path.exists():
         raise CheckpointError(f"no checkpoint at {path}; the run stopped before its first one")
     try:
         state = torch.load(path, weights_only=False)  # our own file: pickled pyribs objects
     except Exception as error:
         raise CheckpointError(f"{path} is not a readable qdil checkpoint: {error}") from error
-    if state.get("format") != FORMAT_VERSION:
+    if not isinstance(state, dict) or state.get("format") != FORMAT_VERSION:
+        found = state.get("format") if isinstance(state, dict) else None
         raise CheckpointError(
-            f"{path} has format {state.get('format')!r}; this qdil reads format {FORMAT_VERSION}"
+            f"{path} has format {found!r}; this qdil reads format {FORMAT_VERSION}"
         )
+    return state
+
+
+def load_checkpoint(run: Run, state: dict[str, Any] | None = None) -> None:
+    """Restore :func:`save_checkpoint`'s state into a freshly built run of the same config.
+
+    Args:
+        run: the run, built from the same recipe.
+        state: the checkpoint, if the caller has read it already (:func:`read_checkpoint`).
+
+    Raises:
+        CheckpointError: if the file is missing, unreadable, of another format version, or
+            was written by a run of another task, reward model or policy size.
+    """
+    path = run.run_dir / CHECKPOINT
+    if state is None:
+        state = read_checkpoint(path)
     if state["task"] != run.task:
         raise CheckpointError(f"{path} belongs to a {state['task']} run, not {run.task}")
     reward_class = f"{type(run.reward).__module__}.{type(run.reward).__qualname__}"
@@ -155,13 +265,21 @@ def load_checkpoint(run: Run) -> None:
             f"{path} holds a {state['reward']['class']} reward model; the config builds "
             f"{reward_class}"
         )
+    scheduler = pickle.loads(state["scheduler"])
+    stored_dim, built_dim = scheduler.archive.solution_dim, run.archives.main.solution_dim
+    if stored_dim != built_dim:  # checkpoints without a stored config reach this
+        raise CheckpointError(
+            f"{path} holds policies of {stored_dim} parameters; the config builds "
+            f"{built_dim} (was rl.init_args.actor_hidden edited in config.yaml?); restore "
+            "config.yaml or start a new run with another --name"
+        )
     run.state.iteration = state["iteration"]
     run.state.env_steps = state["env_steps"]
     run.state.seconds = state["seconds"]
     run.state.rng = np.random.default_rng()
     run.state.rng.bit_generator.state = state["rng"]
     torch.set_rng_state(state["torch_rng"])
-    run.scheduler = pickle.loads(state["scheduler"])
+    run.scheduler = scheduler
     run.emitter = run.scheduler.emitters[0]
     run.archives.main = run.scheduler.archive
     run.archives.true = pickle.loads(state["true_archive"])
@@ -186,11 +304,11 @@ def load_archive(run_dir: str | Path, which: str = "true") -> tuple[Any, int]:
     """
     path = Path(run_dir) / CHECKPOINT
     if not path.exists():
-        raise CheckpointError(f"{run_dir}: no checkpoint at {path}")
-    try:
-        state = torch.load(path, weights_only=False)
-    except Exception as error:
-        raise CheckpointError(f"{path} is not a readable qdil checkpoint: {error}") from error
+        raise CheckpointError(
+            f"{run_dir}: no checkpoint at {path} (the run stopped before its first one; "
+            f"run `qdil fit --resume {run_dir}` to start it over)"
+        )
+    state = read_checkpoint(path)
     if which == "main":
         return pickle.loads(state["scheduler"]).archive, state["iteration"]
     if which not in ("true", "learned"):
