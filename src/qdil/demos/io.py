@@ -273,11 +273,21 @@ def _validate(path: Path, header: dict, arrays: dict[str, np.ndarray], task: str
     def fail(message: str) -> None:
         raise DemoFormatError(f"demonstrations {path}: {message}")
 
+    from qdil.envs.tasks import TASKS
+
     if task is not None and header.get("task") != task:
         fail(
             f"recorded on {header.get('task')!r}, but the run's task is {task!r}; "
             f"use demonstrations of {task} (qdil demos RUN_DIR of a {task} expert)"
         )
+    if str(header.get("task")).removeprefix("qdil/") not in TASKS:
+        fail(
+            f"the header names task {header.get('task')!r}, which qdil does not know "
+            f"(known tasks: {', '.join(TASKS)}); the file is damaged or not from qdil: "
+            "regenerate it with `qdil demos`"
+        )
+    # the file's own sizes are checked even when no task is asked for (qdil demos --info)
+    task = str(header["task"]).removeprefix("qdil/")
     obs, actions, contacts = arrays["obs"], arrays["actions"], arrays["contacts"]
     if obs.ndim != 2 or actions.ndim != 2 or contacts.ndim != 2:
         fail("obs, actions and contacts must be 2-D (steps, size)")
@@ -287,6 +297,18 @@ def _validate(path: Path, header: dict, arrays: dict[str, np.ndarray], task: str
     for name in ("actions", "contacts", "rewards"):
         if len(arrays[name]) != steps:
             fail(f"{name} has {len(arrays[name])} rows, obs has {steps}: steps are not aligned")
+    # the header's sizes describe the arrays; a file where they disagree was altered
+    for name, key in (("obs", "obs_dim"), ("actions", "action_dim"), ("contacts", "num_measures")):
+        if key in header and arrays[name].shape[1] != header[key]:
+            fail(
+                f"{name} has {arrays[name].shape[1]} columns, but the header says "
+                f"{key} = {header[key]}; the file is inconsistent: regenerate it with `qdil demos`"
+            )
+    if "num_steps" in header and header["num_steps"] != steps:
+        fail(
+            f"the header says num_steps = {header['num_steps']}, but obs has {steps} rows; "
+            "the file is inconsistent: regenerate it with `qdil demos`"
+        )
     if task is not None:
         shape = TaskShape.of(task)
         expected = {
@@ -308,6 +330,11 @@ def _validate(path: Path, header: dict, arrays: dict[str, np.ndarray], task: str
     for name in ("terminated", "final_obs", "final_contacts"):
         if len(arrays[name]) != len(ends):
             fail(f"{name} has {len(arrays[name])} rows for {len(ends)} episodes")
+    if "num_episodes" in header and header["num_episodes"] != len(ends):
+        fail(
+            f"the header says num_episodes = {header['num_episodes']}, but episode_ends lists "
+            f"{len(ends)}; the file is inconsistent: regenerate it with `qdil demos`"
+        )
     for name in ("obs", "actions", "final_obs"):
         if not np.isfinite(arrays[name]).all():
             bad = np.argwhere(~np.isfinite(arrays[name]))[0].tolist()
