@@ -1,0 +1,169 @@
+"""The recipe schema of ``qdil fit`` and the checks jsonargparse cannot express.
+
+This module imports the recipe's section types (pyribs, torch, Lightning through the reward
+models), so the command line imports it only when ``qdil fit`` needs the schema: ``qdil
+--help`` and the other commands do not pay for those imports.
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Iterator
+from typing import Any
+
+from jsonargparse import Namespace, lazy_instance
+
+from qdil.config import (
+    BonusConfig,
+    DemoConfig,
+    EnvConfig,
+    LoggingConfig,
+    QDConfig,
+    RewardFactory,
+)
+from qdil.rl.vppo import VPPO
+
+# The smallest value of every integer key that has one. jsonargparse checks the types; these
+# limits are checked after parsing so that a message can name the key and how to set it
+# (0 iterations would leave a directory with only config.yaml, 0 cells an unusable archive,
+# checkpoint_every 0 a ZeroDivisionError after the first iteration).
+MINIMUMS: dict[str, int] = {
+    "seed": 0,
+    "env.num_envs": 1,
+    "env.eval_envs": 1,
+    "env.num_threads": 1,
+    "env.max_episode_steps": 1,
+    "qd.iterations": 1,
+    "qd.cells": 1,
+    "qd.branch_episodes": 1,
+    "qd.mean_episodes": 1,
+    "bonus.cells": 1,
+    "demos.num_episodes": 1,
+    "logging.checkpoint_every": 1,
+    "logging.heatmap_every": 0,
+}
+
+# Keys whose value is a class (``class_path`` + ``init_args``, or a dotted path).
+CLASS_KEYS = ("reward", "rl", "qd.emitter", "qd.scheduler")
+
+
+def recipe(
+    reward: RewardFactory,
+    env: EnvConfig,
+    qd: QDConfig,
+    rl: VPPO = lazy_instance(VPPO),  # noqa: B008 - jsonargparse's lazy default
+    bonus: BonusConfig = BonusConfig(),  # noqa: B008
+    demos: DemoConfig = DemoConfig(),  # noqa: B008
+    logging: LoggingConfig = LoggingConfig(),  # noqa: B008
+    seed: int = 0,
+    name: str | None = None,
+) -> None:
+    """A qdil recipe: one YAML file describes a run.
+
+    Args:
+        reward: reward model: a registered name (``mcwae_wgail``) or ``class_path`` with
+            ``init_args``.
+        env: the task and its simulations.
+        qd: archives, emitter, scheduler and evaluation.
+        rl: the gradient estimator (``class_path``: ``qdil.rl.VPPO`` or a subclass).
+        bonus: the single-step archive exploration bonus.
+        demos: demonstrations for the reward model.
+        logging: run directory, checkpoints, W&B.
+        seed: the run's seed; every random stream derives from it.
+        name: run name and directory under ``logging.root`` (default: recipe name + seed).
+    """
+
+
+def check_values(config: Namespace) -> list[str]:
+    """Problems with the parsed recipe's values, each naming its key and how to fix it.
+
+    Args:
+        config: the namespace ``qdil fit``'s parser returned.
+
+    Returns:
+        One message per key below its minimum (empty if all is well).
+    """
+    problems = []
+    for key, low in MINIMUMS.items():
+        value = config.get(key)
+        if isinstance(value, int) and not isinstance(value, bool) and value < low:
+            problems.append(
+                f"{key} must be at least {low}, got {value}; set it in the recipe or with --{key} N"
+            )
+    return problems
+
+
+def class_path_problem(content: dict[str, Any], overrides: list[str]) -> str | None:
+    """Why a class named in the recipe or on the command line cannot be imported, if so.
+
+    jsonargparse reports a class path in a missing module as a type mismatch of the whole
+    union (eight lines naming ``Callable[...]``); this says which key and which module.
+
+    Args:
+        content: the recipe's YAML content.
+        overrides: the command-line arguments after the recipe.
+
+    Returns:
+        ``"<key>: <what is wrong>"`` for the first class that cannot be imported, or None.
+    """
+    for key, path in _class_paths(content, overrides):
+        problem = _import_problem(path)
+        if problem is not None:
+            return f"{key}: {problem}"
+    return None
+
+
+def _class_paths(content: dict[str, Any], overrides: list[str]) -> Iterator[tuple[str, str]]:
+    """(key, dotted path) of every class the recipe and the overrides name."""
+
+    def walk(value: Any, prefix: str) -> Iterator[tuple[str, str]]:
+        if isinstance(value, dict):
+            if isinstance(value.get("class_path"), str):
+                yield prefix, value["class_path"]
+            for name, item in value.items():
+                yield from walk(item, f"{prefix}.{name}" if prefix else str(name))
+        elif isinstance(value, str) and prefix in CLASS_KEYS and "." in value:
+            yield prefix, value
+
+    yield from walk(content, "")
+    for i, arg in enumerate(overrides):
+        if not arg.startswith("--"):
+            continue
+        flag, sep, value = arg[2:].partition("=")
+        if not sep:
+            value = overrides[i + 1] if i + 1 < len(overrides) else ""
+        is_class = flag.endswith(".class_path") or flag in CLASS_KEYS
+        inline = value.lstrip().startswith(("{", "["))  # a JSON/YAML value, not a path
+        if is_class and "." in value and not inline:
+            yield flag.removesuffix(".class_path"), value
+
+
+def _import_problem(path: str) -> str | None:
+    """What is wrong with the dotted class path ``path``, or None if it imports."""
+    parts = path.split(".")
+    if len(parts) < 2 or not all(part.isidentifier() for part in parts):
+        return f"{path!r} is not a class path (package.module.Class)"
+    for cut in range(len(parts) - 1, 0, -1):
+        module_name = ".".join(parts[:cut])
+        try:
+            obj: Any = importlib.import_module(module_name)
+        except ModuleNotFoundError as error:
+            if error.name and not module_name.startswith(error.name):
+                # the module exists but itself imports something missing
+                return f"importing {module_name} (for {path!r}) failed: {error}"
+            continue  # maybe a class nested in a shorter module path
+        except Exception as error:  # a plugin module that fails at import
+            return f"importing {module_name} (for {path!r}) failed: {type(error).__name__}: {error}"
+        for depth, attr in enumerate(parts[cut:]):
+            if not hasattr(obj, attr):
+                if depth == 0 and cut + 1 < len(parts):
+                    missing = f"no module named {'.'.join(parts[: cut + 1])!r}"
+                else:
+                    missing = f"{'.'.join(parts[: cut + depth])} has no {attr!r}"
+                return f"cannot import {path!r}: {missing}; check the class path's spelling"
+            obj = getattr(obj, attr)
+        return None
+    return (
+        f"cannot import {path!r}: no module named {parts[0]!r}; check the class path's "
+        "spelling, or install the package that provides it"
+    )

@@ -1,0 +1,181 @@
+"""First contact through the real command line: every --help, and bad inputs as clear errors.
+
+Each bad input must exit non-zero with a short message (no traceback) that names the field,
+file or value, and a bad recipe must be refused before a run directory exists.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from qdil.cli import main
+
+ROOT = Path(__file__).resolve().parents[2]
+SMOKE = ROOT / "recipes" / "smoke" / "walker_true.yaml"
+
+
+def cli(args: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
+    """(exit code, stdout, stderr) of ``qdil ARGS``, as the console script would give them."""
+    try:
+        main(args)
+        code: int | str | None = 0
+    except SystemExit as exit_:
+        code = exit_.code
+    out, err = capsys.readouterr()
+    if isinstance(code, str):  # SystemExit("message"): Python prints it and exits 1
+        return 1, out, err + code
+    return code or 0, out, err
+
+
+HELP = {
+    "qdil": ([], "fit,report,rewards"),
+    "qdil --help": (["--help"], "COMMAND --help"),
+    "fit": (["fit", "--help"], "--qd.iterations"),
+    "fit -h after a recipe": (["fit", str(SMOKE), "-h"], "--logging.checkpoint_every"),
+    "fit --reward.help NAME": (["fit", "--reward.help", "gail"], "--reward.gp_weight"),
+    "rewards": (["rewards", "--help"], "list"),
+    "rewards list": (["rewards", "list", "--help"], "description and source"),
+    "eval": (["eval", "--help"], "--episodes"),
+    "report": (["report", "--help"], "--out"),
+    "demos": (["demos", "--help"], "--top"),
+}
+
+
+@pytest.mark.parametrize(("args", "option"), list(HELP.values()), ids=list(HELP))
+def test_every_help_exits_0_and_lists_options(
+    args: list[str], option: str, capsys, monkeypatch, tmp_path: Path
+) -> None:
+    monkeypatch.chdir(tmp_path)
+    code, out, err = cli(args, capsys)
+    assert code == 0, err
+    assert option in out
+    if not args or args[-1] in ("--help", "-h"):
+        assert "usage:" in out
+
+
+def test_help_of_the_light_commands_imports_no_torch() -> None:
+    """`qdil --help` answers at once: no torch, Lightning or pyribs before a command needs them."""
+    script = (
+        "import sys\n"
+        "from qdil.cli import main\n"
+        "for args in ([], ['--help'], ['eval', '--help'], ['report', '--help'],\n"
+        "             ['demos', '--help'], ['rewards', '--help']):\n"
+        "    try:\n"
+        "        main(args)\n"
+        "    except SystemExit as exit_:\n"
+        "        assert not exit_.code, (args, exit_.code)\n"
+        "heavy = [m for m in ('torch', 'lightning', 'ribs', 'jsonargparse') if m in sys.modules]\n"
+        "assert not heavy, heavy\n"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, timeout=120, check=False
+    )
+    assert done.returncode == 0, done.stderr[-2000:]
+
+
+@pytest.fixture
+def demo_files(walker_demos: Path, tmp_path: Path) -> dict[str, Path]:
+    """Demonstration files whose header disagrees with their arrays, or names no task."""
+    data = dict(np.load(walker_demos))
+    header = json.loads(str(data["header"]))
+    files = {}
+    for name, change in {"obs_dim": {"obs_dim": 18}, "task": {"task": "Nosuch-v9"}}.items():
+        files[name] = tmp_path / f"bad_{name}.npz"
+        np.savez(files[name], **{**data, "header": np.array(json.dumps({**header, **change}))})
+    return files
+
+
+BAD_EMITTER = """\
+reward: true_reward
+env: {task: Walker2d-v5}
+qd:
+  emitter:
+    class_path: nosuch_module.Emitter
+"""
+
+# (arguments, words the message must hold); {smoke}, {empty}, {file}, {bad_recipe},
+# {bad_obs_dim} and {bad_task} are filled in by the test
+CASES = {
+    "iterations -1": (
+        ["fit", "{smoke}", "--qd.iterations", "-1"],
+        ["qd.iterations must be at least 1, got -1"],
+    ),
+    "iterations 0": (
+        ["fit", "{smoke}", "--qd.iterations", "0"],
+        ["qd.iterations must be at least 1, got 0"],
+    ),
+    "cells 0": (["fit", "{smoke}", "--qd.cells", "0"], ["qd.cells must be at least 1, got 0"]),
+    "checkpoint_every 0": (
+        ["fit", "{smoke}", "--logging.checkpoint_every", "0"],
+        ["logging.checkpoint_every must be at least 1, got 0"],
+    ),
+    "seed -5": (["fit", "{smoke}", "--seed", "-5"], ["seed must be at least 0, got -5"]),
+    "recipe is a directory": (["fit", "{empty}"], ["{empty}", "is a directory"]),
+    "emitter in a missing module (recipe)": (
+        ["fit", "{bad_recipe}"],
+        ["qd.emitter", "nosuch_module.Emitter", "no module named 'nosuch_module'"],
+    ),
+    "emitter in a missing module (flag)": (
+        ["fit", "{smoke}", "--qd.emitter.class_path", "nosuch_module.Emitter"],
+        ["qd.emitter", "no module named 'nosuch_module'"],
+    ),
+    "resume of a file": (["fit", "--resume", "{file}"], ["{file}", "not a qdil run directory"]),
+    "eval of an empty directory": (["eval", "{empty}"], ["{empty}", "no config.yaml"]),
+    "eval of a file": (["eval", "{file}"], ["{file}", "is a file, not a run directory"]),
+    "eval episodes 0": (["eval", "{empty}", "--episodes", "0"], ["--episodes", "got 0"]),
+    "demos top 0": (["demos", "{empty}", "--top", "0", "--out", "x.npz"], ["--top", "got 0"]),
+    "demos of an empty directory": (
+        ["demos", "{empty}", "--out", "x.npz"],
+        ["{empty}", "no config.yaml"],
+    ),
+    "report with no run": (
+        ["report", "{empty}", "--out", "report"],
+        ["no run could be included"],
+    ),
+    "demos --info, header obs_dim": (
+        ["demos", "--info", "{bad_obs_dim}"],
+        ["{bad_obs_dim}", "obs has 17 columns", "obs_dim = 18"],
+    ),
+    "demos --info, unknown task": (
+        ["demos", "--info", "{bad_task}"],
+        ["{bad_task}", "'Nosuch-v9'", "known tasks: Walker2d-v5"],
+    ),
+}
+
+
+@pytest.mark.parametrize(("args", "words"), list(CASES.values()), ids=list(CASES))
+def test_bad_inputs_are_clear_errors(
+    args: list[str],
+    words: list[str],
+    demo_files: dict[str, Path],
+    capsys,
+    monkeypatch,
+    tmp_path: Path,
+) -> None:
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("QDIL_PLUGIN_PATH", str(tmp_path / "no-plugins"))
+    (tmp_path / "empty").mkdir()
+    (tmp_path / "file").write_text("not a run\n")
+    (tmp_path / "bad.yaml").write_text(BAD_EMITTER)
+    names = {
+        "smoke": str(SMOKE),
+        "empty": "empty",
+        "file": "file",
+        "bad_recipe": "bad.yaml",
+        "bad_obs_dim": str(demo_files["obs_dim"]),
+        "bad_task": str(demo_files["task"]),
+    }
+    code, _, err = cli([arg.format(**names) for arg in args], capsys)
+    assert code != 0
+    for word in words:
+        assert word.format(**names) in err, err
+    assert "Traceback" not in err and len(err.splitlines()) <= 8, err
+    if args[0] == "eval":
+        assert "num_envs" not in err  # the user's flag, not an internal name
+    assert not (tmp_path / "runs").exists(), "a refused recipe must leave no run directory"

@@ -1,0 +1,144 @@
+"""``qdil fit --resume`` through the real command line: a run directory is never stuck, and a
+resume whose config.yaml was edited since its checkpoint is refused, naming the keys."""
+
+from __future__ import annotations
+
+import csv
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import torch
+import yaml
+
+from qdil.cli import main
+from qdil.qd.checkpoint import config_differences
+
+ROOT = Path(__file__).resolve().parents[2]
+SMOKE = ROOT / "recipes" / "smoke" / "walker_true.yaml"
+
+
+def iterations(run_dir: Path) -> list[str]:
+    with open(run_dir / "metrics.csv", newline="") as file:
+        return [row["iteration"] for row in csv.DictReader(file)]
+
+
+def dead_pid() -> int:
+    """The id of a process that has exited (as a killed writer has)."""
+    process = subprocess.Popen([sys.executable, "-c", "pass"])
+    process.wait()
+    return process.pid
+
+
+def test_a_run_killed_before_its_first_checkpoint_starts_over(
+    tmp_path: Path, monkeypatch, capsys
+) -> None:
+    """SIGKILL after iteration 1, before the first checkpoint; --resume starts it over."""
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("QDIL_PLUGIN_PATH", str(tmp_path / "no-plugins"))
+    args = ["--qd.iterations", "2", "--logging.checkpoint_every", "2", "--name", "early"]
+    run_dir = Path("runs") / "early"
+    process = subprocess.Popen(
+        [sys.executable, "-m", "qdil.cli", "fit", str(SMOKE), *args],
+        env={**os.environ, "WANDB_MODE": "disabled"},
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    metrics = run_dir / "metrics.csv"
+    deadline = time.time() + 300
+    # header and one row: iteration 1 is logged, the checkpoint comes after iteration 2
+    while process.poll() is None and time.time() < deadline:
+        if metrics.exists() and metrics.read_text().count("\n") >= 2:
+            break
+        time.sleep(0.05)
+    process.send_signal(signal.SIGKILL)
+    process.wait()
+    assert process.returncode == -signal.SIGKILL, "the run must be killed, not finish"
+    checkpoint = run_dir / "checkpoints" / "last.pt"
+    assert not checkpoint.exists() and iterations(run_dir) == ["1"]
+    stale = run_dir / "checkpoints" / f".last.pt.tmp-{dead_pid()}"  # a killed write's litter
+    stale.parent.mkdir(exist_ok=True)
+    stale.write_bytes(b"half a checkpoint")
+
+    with pytest.raises(SystemExit, match=f"`qdil fit --resume {run_dir}`"):
+        main(["fit", str(SMOKE), *args])
+
+    main(["fit", "--resume", str(run_dir)])
+    stderr = capsys.readouterr().err
+    assert "has no checkpoint" in stderr and "starting it over" in stderr
+    assert f"removed {stale}" in stderr and not stale.exists()
+    assert iterations(run_dir) == ["1", "2"]  # the killed attempt's row is not kept twice
+    assert torch.load(checkpoint, weights_only=False)["iteration"] == 2
+
+
+@pytest.fixture(scope="module")
+def finished(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A one-iteration smoke run with its checkpoint."""
+    root = tmp_path_factory.mktemp("resume")
+    with pytest.MonkeyPatch.context() as patch:
+        patch.chdir(root)
+        patch.setenv("QDIL_PLUGIN_PATH", str(root / "no-plugins"))
+        main(["fit", str(SMOKE), "--qd.iterations", "1", "--name", "done"])
+    return root / "runs" / "done"
+
+
+def _cells(config: dict) -> None:
+    config["qd"]["cells"] = 20
+
+
+def _actor_hidden(config: dict) -> None:
+    config["rl"]["init_args"]["actor_hidden"] = [64, 64]
+
+
+EDITS = {
+    "qd.cells": (_cells, False, ["qd.cells: 10 -> 20"]),
+    "actor_hidden": (_actor_hidden, False, ["rl.init_args.actor_hidden: [128, 128] -> [64, 64]"]),
+    # a checkpoint of a qdil that did not store the recipe: the policy size still tells
+    "actor_hidden, older checkpoint": (_actor_hidden, True, ["policies of", "actor_hidden"]),
+}
+
+
+@pytest.mark.parametrize(("edit", "older", "words"), list(EDITS.values()), ids=list(EDITS))
+def test_resume_after_config_yaml_was_edited_is_refused(
+    edit, older: bool, words: list[str], finished: Path, tmp_path: Path, monkeypatch
+) -> None:
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("QDIL_PLUGIN_PATH", str(tmp_path / "no-plugins"))
+    run_dir = tmp_path / "edited"
+    shutil.copytree(finished, run_dir)
+    config_path = run_dir / "config.yaml"
+    config = yaml.safe_load(config_path.read_text())
+    edit(config)
+    config_path.write_text(yaml.safe_dump(config))
+    checkpoint = run_dir / "checkpoints" / "last.pt"
+    if older:
+        state = torch.load(checkpoint, weights_only=False)
+        del state["config"]
+        torch.save(state, checkpoint)
+    before = checkpoint.read_bytes()
+    with pytest.raises(SystemExit) as refused:
+        main(["fit", "--resume", str(run_dir)])
+    message = str(refused.value.code)
+    for word in words:
+        assert word in message, message
+    assert "config.yaml" in message and "Traceback" not in message
+    assert checkpoint.read_bytes() == before, "a refused resume must not touch the checkpoint"
+
+
+def test_a_resume_may_change_iterations_threads_and_logging_only() -> None:
+    stored = {"qd": {"iterations": 3, "cells": 10}, "env": {"num_threads": None, "task": "W"}}
+    stored["logging"] = {"progress": False, "checkpoint_every": 2}
+    current = {
+        "qd": {"iterations": 9, "cells": 10},
+        "env": {"num_threads": 2, "task": "W"},
+        "logging": {"progress": True, "checkpoint_every": 5},
+    }
+    assert config_differences(stored, current) == []
+    current["env"]["task"] = "H"
+    current["seed"] = 1
+    assert config_differences(stored, current) == ["env.task: 'W' -> 'H'", "seed: (absent) -> 1"]
