@@ -115,8 +115,6 @@ def fit_help(request: list[str]) -> None:
         raise SystemExit(f"qdil fit: error: {request[0]}: {error}") from None
     try:
         fit_parser().parse_args(request)  # a help action prints and exits 0
-    except SystemExit:
-        raise
     except Exception as error:  # an unknown class for --X.help: jsonargparse names it
         raise SystemExit(f"qdil fit: error: {error}") from None
     raise SystemExit(0)  # not reached: help actions exit
