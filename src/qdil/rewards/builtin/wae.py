@@ -147,10 +147,17 @@ class WAEReward(AdversarialReward):
             torch.optim.Adam(self.adversary.parameters(), lr=self.learning_rate),
         ]
 
+    def score(self, batch: TransitionBatch) -> torch.Tensor:
+        """(B,) critic values D(z̄) at the encoder mean."""
+        mean, _ = self.encode(self.features(batch))
+        return self.critic(mean)
+
     @override
     def reward(self, batch: TransitionBatch) -> torch.Tensor:
-        mean, _ = self.encode(self.features(batch))
-        score = self.critic(mean)
+        return self.transform(self.score(batch))
+
+    def transform(self, score: torch.Tensor) -> torch.Tensor:
+        """(B,) rewards from critic values, by ``reward_type``."""
         if self.reward_type == "critic":
             return score
         if self.reward_type == "sigmoid":
@@ -173,15 +180,13 @@ class WAEReward(AdversarialReward):
         """
         if len(policy) > self.calibration_samples:
             policy = policy[torch.randperm(len(policy))[: self.calibration_samples]]
-        means = []
-        for batch in (expert, policy):
-            codes, _ = self.encode(self.features(batch))
-            means.append(float(self.critic(codes).mean()))
+        scores = self.score(expert), self.score(policy)
+        means = [float(s.mean()) for s in scores]
         self.critic_means.copy_(torch.tensor(means, dtype=torch.float64))
         metrics = {"critic_expert": means[0], "critic_policy": means[1]}
-        if self.reward_type == "calibrated":
-            metrics["reward_expert"] = float(self.reward(expert).mean())
-            metrics["reward_policy"] = float(self.reward(policy).mean())
+        if self.reward_type == "calibrated":  # from the same scores, not a second pass
+            metrics["reward_expert"] = float(self.transform(scores[0]).mean())
+            metrics["reward_policy"] = float(self.transform(scores[1]).mean())
         return metrics
 
     def adversary_loss(self, z_e: torch.Tensor, z_p: torch.Tensor) -> torch.Tensor:
