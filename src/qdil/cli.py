@@ -499,9 +499,13 @@ def _is_user_error(error: BaseException) -> bool:
     """Whether ``error`` is a bad recipe, file or plugin, whose message says how to fix it."""
     if isinstance(error, ValueError | FileNotFoundError | ImportError):  # DemoFormatError too
         return True
-    # read from sys.modules: importing the module here would cost every command torch
+    # read from sys.modules: importing the modules here would cost every command torch
     checkpoint = sys.modules.get("qdil.qd.checkpoint")
-    return checkpoint is not None and isinstance(error, checkpoint.CheckpointError)
+    if checkpoint is not None and isinstance(error, checkpoint.CheckpointError):
+        return True
+    # an incomplete plugin: the message names the class and the missing methods
+    base = sys.modules.get("qdil.rewards.base")
+    return base is not None and isinstance(error, base.RewardContractError)
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -21,6 +21,7 @@ from qdil.config import (
     QDConfig,
     RewardFactory,
 )
+from qdil.rewards.base import RewardContractError, RewardModel, check_contract
 from qdil.rl.vppo import VPPO
 
 # The smallest value of every integer key that has one. jsonargparse checks the types; these
@@ -90,7 +91,37 @@ def check_values(config: Namespace) -> list[str]:
             problems.append(
                 f"{key} must be at least {low}, got {value}; set it in the recipe or with --{key} N"
             )
+    reward = config.get("reward")
+    path = reward.get("class_path") if isinstance(reward, Namespace) else None
+    if isinstance(path, str):
+        problem = _contract_problem(path)
+        if problem:
+            problems.append(f"reward: {problem}")
     return problems
+
+
+def _contract_problem(path: str) -> str | None:
+    """What the reward model class at ``path`` lacks of the contract, or None.
+
+    Checked here so that an incomplete plugin is refused before a run directory exists and
+    before the environments are built, not at the first call of the missing method.
+    """
+    cut = path.rfind(".")
+    while cut > 0:
+        try:
+            obj: Any = importlib.import_module(path[:cut])
+        except ImportError:
+            cut = path.rfind(".", 0, cut)  # a class nested in a shorter module path
+            continue
+        for attr in path[cut + 1 :].split("."):
+            obj = getattr(obj, attr, None)
+        if isinstance(obj, type) and issubclass(obj, RewardModel):
+            try:
+                check_contract(obj)
+            except RewardContractError as error:
+                return str(error)
+        return None
+    return None
 
 
 def class_path_problem(content: dict[str, Any], overrides: list[str]) -> str | None:

@@ -179,3 +179,70 @@ def test_bad_inputs_are_clear_errors(
     if args[0] == "eval":
         assert "num_envs" not in err  # the user's flag, not an internal name
     assert not (tmp_path / "runs").exists(), "a refused recipe must leave no run directory"
+
+
+@pytest.fixture
+def broken_plugins(monkeypatch) -> Path:
+    """tests/cli/broken_plugins as the plugin folder, discovered in a copy of the registry."""
+    from qdil.rewards import registry
+
+    folder = Path(__file__).parent / "broken_plugins"
+    registry.discover()  # built-ins first, so the copy below holds them
+    monkeypatch.setattr(registry, "_REGISTRY", dict(registry._REGISTRY))
+    monkeypatch.setattr(registry, "_discovered", False)
+    for name in [m for m in sys.modules if m.startswith(registry.LOCAL_PACKAGE)]:
+        monkeypatch.delitem(sys.modules, name)
+    monkeypatch.setenv("QDIL_PLUGIN_PATH", str(folder))
+    yield folder
+    # forget the broken modules; monkeypatch then restores the registry and the old modules
+    for name in [m for m in sys.modules if m.startswith(registry.LOCAL_PACKAGE)]:
+        del sys.modules[name]
+
+
+PLUGIN = "qdil_local_plugins.broken_rewards"
+
+# reward model -> (words the message must hold, whether a run directory may be left)
+BROKEN_PLUGINS = {
+    "no_reward_method": (
+        [f"reward model no_reward_method ({PLUGIN}.NoRewardMethod)", "implement reward(batch)"],
+        False,
+    ),
+    "no_update_method": (
+        [f"({PLUGIN}.NoUpdateMethod)", "implement update(expert, policy, iteration);"],
+        False,
+    ),
+    "no_learning_methods": (
+        [
+            "not implement configure_optimizers() and update(expert, policy, iteration)",
+            "or set learned = False",
+        ],
+        False,
+    ),
+}
+
+
+@pytest.mark.parametrize(
+    ("reward", "expected"), list(BROKEN_PLUGINS.items()), ids=list(BROKEN_PLUGINS)
+)
+def test_broken_reward_plugins_are_clear_errors(
+    reward: str, expected: tuple[list[str], bool], broken_plugins, capsys, monkeypatch, tmp_path
+) -> None:
+    """An incomplete plugin is refused before training; NaN rewards stop it with advice."""
+    words, leaves_run = expected
+    monkeypatch.chdir(tmp_path)
+    code, _, err = cli(["fit", str(SMOKE), "--reward", reward, "--name", reward], capsys)
+    assert code != 0
+    for word in words:
+        assert word in err, err
+    assert "Traceback" not in err and len(err.splitlines()) <= 8, err
+    if not leaves_run:  # refused with the recipe: nothing built, nothing trained
+        assert not (tmp_path / "runs").exists()
+
+
+def test_an_incomplete_model_is_refused_at_construction(broken_plugins) -> None:
+    """Code that builds a model without the command line gets the same error, not a late one."""
+    from qdil.rewards import get_reward
+    from qdil.rewards.base import RewardContractError
+
+    with pytest.raises(RewardContractError, match=r"NoRewardMethod\) does not implement reward"):
+        get_reward("no_reward_method")(5, 2, 2)

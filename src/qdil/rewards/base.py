@@ -35,6 +35,71 @@ class NonFiniteRewardError(RuntimeError):
     """A reward model produced NaN or inf rewards or losses."""
 
 
+class RewardContractError(TypeError):
+    """A reward model class lacks a method of the contract that the QD loop calls."""
+
+
+# What the QD loop calls on every model, and on learned models (``learned = True``) besides;
+# each with the signature a message shows.
+REQUIRED_METHODS = {"reward": "reward(batch)"}
+REQUIRED_WHEN_LEARNED = {
+    "configure_optimizers": "configure_optimizers()",
+    "update": "update(expert, policy, iteration)",
+}
+
+
+def missing_methods(cls: type[RewardModel]) -> list[str]:
+    """Signatures of the contract's methods that ``cls`` inherits unimplemented.
+
+    Args:
+        cls: a :class:`RewardModel` subclass.
+
+    Returns:
+        ``reward(batch)`` if it is missing, and for a learned model ``configure_optimizers()``
+        and ``update(...)`` if they are missing; empty when the class is complete.
+    """
+    required = dict(REQUIRED_METHODS)
+    if cls.learned:
+        required |= REQUIRED_WHEN_LEARNED
+    # the base versions only raise (reward), return nothing (Lightning's configure_optimizers)
+    # or train nothing (update), so inheriting one of them means it was never written
+    defaults = {
+        "reward": RewardModel,
+        "update": RewardModel,
+        "configure_optimizers": L.LightningModule,
+    }
+    return [
+        signature
+        for method, signature in required.items()
+        if getattr(cls, method) is getattr(defaults[method], method)
+    ]
+
+
+def model_label(cls: type[RewardModel]) -> str:
+    """``name (module.Class)``, or ``module.Class`` for an unregistered class: what to open."""
+    path = f"{cls.__module__}.{cls.__qualname__}"
+    return f"{cls.name} ({path})" if cls.name else path
+
+
+def check_contract(cls: type[RewardModel]) -> None:
+    """Refuse a reward model class that lacks a method of the contract, before training.
+
+    Raises:
+        RewardContractError: naming the class, its module and the missing methods.
+    """
+    missing = missing_methods(cls)
+    if not missing:
+        return
+    learned = [m for m in missing if m not in REQUIRED_METHODS.values()]
+    advice = "implement it" if len(missing) == 1 else "implement them"
+    if learned:  # a fixed reward needs neither an optimiser nor an update
+        advice += ", or set learned = False for a reward that is not trained online"
+    raise RewardContractError(
+        f"reward model {model_label(cls)} does not implement {' and '.join(missing)}; {advice} "
+        "(the contract: docs/rewards/index.md#the-contract)"
+    )
+
+
 class RewardModel(L.LightningModule):
     """Base class of every reward model (built-in or plugin).
 
@@ -69,6 +134,7 @@ class RewardModel(L.LightningModule):
 
     def __init__(self, obs_dim: int, action_dim: int, num_measures: int) -> None:
         super().__init__()
+        check_contract(type(self))  # before any training, not at the first missing call
         for label, value in (
             ("obs_dim", obs_dim),
             ("action_dim", action_dim),
