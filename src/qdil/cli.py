@@ -198,6 +198,7 @@ def fit(argv: list[str]) -> None:
         remove_stale_temporaries,
     )
     from qdil.qd.loop import run_qd
+    from qdil.rewards.base import NonFiniteRewardError
 
     config, resume_dir, stem = parse_fit(argv)
     parser = fit_parser()
@@ -242,7 +243,13 @@ def fit(argv: list[str]) -> None:
         print(f"resuming {run_dir} at iteration {run.state.iteration}", file=sys.stderr)
     if run.tracker.csv.path.exists():  # rows logged after the checkpoint (all, if none)
         run.tracker.csv.truncate(run.state.iteration)
-    run_qd(run)
+    try:
+        run_qd(run)
+    except NonFiniteRewardError as error:
+        raise SystemExit(
+            f"qdil fit: error: {error}\nAfter the fix, `qdil fit --resume {run_dir}` continues "
+            "the run from its last checkpoint (or starts it over if it has none)."
+        ) from None
     run.tracker.finish(run)
     print(f"run directory: {run_dir}", file=sys.stderr)
 
@@ -503,9 +510,12 @@ def _is_user_error(error: BaseException) -> bool:
     checkpoint = sys.modules.get("qdil.qd.checkpoint")
     if checkpoint is not None and isinstance(error, checkpoint.CheckpointError):
         return True
-    # an incomplete plugin: the message names the class and the missing methods
+    # an incomplete plugin, or a reward model whose values turned NaN: the message names
+    # the model and what to check; a traceback into the loop would only hide it
     base = sys.modules.get("qdil.rewards.base")
-    return base is not None and isinstance(error, base.RewardContractError)
+    return base is not None and isinstance(
+        error, base.RewardContractError | base.NonFiniteRewardError
+    )
 
 
 def main(argv: list[str] | None = None) -> None:

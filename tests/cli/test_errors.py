@@ -201,7 +201,7 @@ def broken_plugins(monkeypatch) -> Path:
 
 PLUGIN = "qdil_local_plugins.broken_rewards"
 
-# reward model -> (words the message must hold, whether a run directory may be left)
+# "reward model [flags]" -> (words the message must hold, whether a run directory may be left)
 BROKEN_PLUGINS = {
     "no_reward_method": (
         [f"reward model no_reward_method ({PLUGIN}.NoRewardMethod)", "implement reward(batch)"],
@@ -218,6 +218,28 @@ BROKEN_PLUGINS = {
         ],
         False,
     ),
+    # the run started: it is left for `qdil fit --resume` once the model is fixed
+    "nan_fixed": (
+        [
+            f"reward model nan_fixed ({PLUGIN}.NaNFixed): non-finite rewards at QD iteration 1",
+            "not trained online, so check reward()",
+            "qdil fit --resume runs/nan_fixed",
+        ],
+        True,
+    ),
+    "nan_untrained": (
+        [f"({PLUGIN}.NaNUntrained)", "iteration 1", "before its first update"],
+        True,
+    ),
+    "nan_after_update": (
+        ["non-finite rewards at QD iteration 2", "diverged: lower its learning rate"],
+        True,
+    ),
+    # the exploration bonus wraps the model: the message still names the model that failed
+    "nan_fixed --bonus.enabled true": (
+        [f"reward model nan_fixed ({PLUGIN}.NaNFixed): non-finite rewards", "not trained"],
+        True,
+    ),
 }
 
 
@@ -229,14 +251,19 @@ def test_broken_reward_plugins_are_clear_errors(
 ) -> None:
     """An incomplete plugin is refused before training; NaN rewards stop it with advice."""
     words, leaves_run = expected
+    reward, *flags = reward.split()
     monkeypatch.chdir(tmp_path)
-    code, _, err = cli(["fit", str(SMOKE), "--reward", reward, "--name", reward], capsys)
+    code, _, err = cli(["fit", str(SMOKE), "--reward", reward, "--name", reward, *flags], capsys)
     assert code != 0
     for word in words:
         assert word in err, err
     assert "Traceback" not in err and len(err.splitlines()) <= 8, err
     if not leaves_run:  # refused with the recipe: nothing built, nothing trained
         assert not (tmp_path / "runs").exists()
+    if reward.startswith("nan") and reward != "nan_fixed":
+        assert "not trained online" not in err  # the advice fits a learned model
+    if reward == "nan_fixed":
+        assert "learning rate" not in err  # nothing to lower for a fixed reward
 
 
 def test_an_incomplete_model_is_refused_at_construction(broken_plugins) -> None:

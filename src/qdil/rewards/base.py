@@ -219,12 +219,38 @@ class RewardModel(L.LightningModule):
         return (actions - self.action_mean) / self.action_std
 
     def check_finite(self, value: torch.Tensor, what: str, iteration: int) -> None:
-        """Raise :class:`NonFiniteRewardError` naming the model, the value and the iteration."""
-        if not torch.isfinite(value).all():
-            raise NonFiniteRewardError(
-                f"reward model {self.name or type(self).__name__}: non-finite {what} at QD "
-                f"iteration {iteration}; lower its learning rate or raise its gradient penalty"
+        """Raise :class:`NonFiniteRewardError` naming the model, the value and the iteration.
+
+        The message's advice depends on where the values came from: a model trained online
+        may have diverged, while a fixed one (or a learned one before its first update) computes
+        them in ``reward()`` from its inputs and what ``setup``/``pretrain`` fitted.
+        """
+        finite = torch.isfinite(value)
+        if finite.all():
+            return
+        nan = int(torch.isnan(value).sum())
+        inf = int((~finite).sum()) - nan
+        kinds = " and ".join(f"{n} {kind}" for n, kind in ((nan, "NaN"), (inf, "inf")) if n)
+        count = f"{kinds} among {value.numel()} values"
+        if not self.learned:
+            advice = (
+                "it is not trained online, so check reward() and what setup()/pretrain() fit "
+                "on the demonstrations (a division by a zero std, the log of 0, NaN inputs)"
             )
+        elif what == "rewards" and iteration <= 1:
+            advice = (
+                "this is before its first update, so check reward() and setup() on the "
+                "demonstrations (a division by a zero std, the log of 0, NaN inputs)"
+            )
+        else:
+            advice = (
+                "its training diverged: lower its learning rate or raise its gradient "
+                "penalty (metrics.csv holds its reward/* metrics of the iterations before)"
+            )
+        raise NonFiniteRewardError(
+            f"reward model {model_label(type(self))}: non-finite {what} at QD iteration "
+            f"{iteration} ({count}); {advice}"
+        )
 
     def extra_state(self) -> dict[str, Any]:
         """State beyond ``state_dict`` (counters, pools) for checkpoints."""

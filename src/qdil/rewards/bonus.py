@@ -132,6 +132,12 @@ class ExplorationBonus(RewardModel):
         return base + bonus
 
     @override
+    def check_finite(self, value: torch.Tensor, what: str, iteration: int) -> None:
+        # the bonus lies in [weight/2, weight): non-finite values come from the wrapped
+        # model, which the message must name (with its own advice: learned or fixed)
+        self.model.check_finite(value, what, iteration)
+
+    @override
     def extra_state(self) -> dict[str, Any]:
         return self.model.extra_state()
 

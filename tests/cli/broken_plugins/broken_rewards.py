@@ -1,4 +1,4 @@
-"""Reward plugins that break the contract: ``qdil fit`` must refuse them clearly.
+"""Reward plugins that break the contract or turn NaN: ``qdil fit`` must refuse them clearly.
 
 Registered only by the ``broken_plugins`` fixture of tests/cli/test_errors.py, which points
 ``$QDIL_PLUGIN_PATH`` at this folder in a copy of the registry; each class is as small as the
@@ -50,3 +50,39 @@ class NoLearningMethods(RewardModel):
 
     def reward(self, batch: TransitionBatch) -> torch.Tensor:
         return batch.obs.sum(-1)
+
+
+@register_reward("nan_fixed")
+class NaNFixed(RewardModel):
+    """A fixed reward that is NaN everywhere."""
+
+    learned = False
+    needs_demos = False
+
+    def reward(self, batch: TransitionBatch) -> torch.Tensor:
+        return torch.full((len(batch),), float("nan"))
+
+
+@register_reward("nan_untrained")
+class NaNUntrained(_Linear):
+    """A learned reward that is NaN before any update."""
+
+    def reward(self, batch: TransitionBatch) -> torch.Tensor:
+        return super().reward(batch) * float("nan")
+
+    def update(
+        self, expert: TransitionBatch | None, policy: TransitionBatch, iteration: int
+    ) -> dict[str, float]:
+        return {}
+
+
+@register_reward("nan_after_update")
+class NaNAfterUpdate(_Linear):
+    """A learned reward whose first update diverges (its weights become NaN)."""
+
+    def update(
+        self, expert: TransitionBatch | None, policy: TransitionBatch, iteration: int
+    ) -> dict[str, float]:
+        with torch.no_grad():
+            self.net.weight.fill_(float("nan"))
+        return {}
