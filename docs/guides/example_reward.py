@@ -11,8 +11,10 @@ https://arxiv.org/abs/2104.02180):
 
 x = (s, a), or (s, a, δ(s)) with ``use_measures``, standardised with the demonstrations'
 statistics by :class:`~qdil.rewards.adversarial.AdversarialReward`, which also supplies the
-(expert, policy) minibatches. Drop this file into ``plugins/`` (or a folder on
-``$QDIL_PLUGIN_PATH``) and ``qdil rewards list`` shows ``lsgail``.
+(expert, policy) minibatches. Copy this file into your plugin package
+(``src/qdil_my_reward/example_reward.py``, with the entry point of the reward-plugin guide's
+section 2) or into a local plugin folder (``./plugins`` or one on ``$QDIL_PLUGIN_PATH``);
+``qdil rewards list`` then shows ``lsgail``.
 """
 
 from __future__ import annotations

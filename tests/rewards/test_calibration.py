@@ -7,10 +7,10 @@ import math
 import numpy as np
 import pytest
 import torch
-from _synthetic import ACT, OBS, K, as_rollout, synthetic, train
 
 from qdil.rewards.bonus import ExplorationBonus
 from qdil.rewards.builtin.wae import MCWAEWGAIL, calibrated_logit
+from qdil.rewards.contract import ACT, OBS, K, as_rollout, synthetic, train
 from qdil.rewards.nets import gail_reward
 
 
