@@ -189,13 +189,12 @@ def fit(argv: list[str]) -> None:
         fit_help(help_request)
     import yaml
 
+    from qdil.files import atomic_write, remove_stale_temporaries
     from qdil.qd.checkpoint import (
         CHECKPOINT,
-        atomic_write,
         config_differences,
         load_checkpoint,
         read_checkpoint,
-        remove_stale_temporaries,
     )
     from qdil.qd.loop import run_qd
     from qdil.rewards.base import NonFiniteRewardError
@@ -215,7 +214,7 @@ def fit(argv: list[str]) -> None:
             )
     config.name = name
     resolved = parser.dump(config, skip_unset=False)
-    for path in remove_stale_temporaries(run_dir):
+    for path in remove_stale_temporaries(run_dir, run_dir / CHECKPOINT.parent):
         print(f"removed {path}, left by a killed write", file=sys.stderr)
     state = None
     if resume_dir is not None and (run_dir / CHECKPOINT).exists():

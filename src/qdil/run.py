@@ -2,55 +2,26 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import lightning as L
 import numpy as np
 import torch
-from ribs.emitters import EmitterBase
 from ribs.schedulers import Scheduler
 
 from qdil.config import BonusConfig, DemoConfig, EnvConfig, LoggingConfig, QDConfig, RewardFactory
-from qdil.data import TransitionBatch
-from qdil.demos.dataset import DemoSet
+from qdil.demos.io import load_demos
 from qdil.envs.vector import LocomotionVectorEnv
 from qdil.qd.archives import RunArchives, elite_fields, make_grid
 from qdil.qd.emitter import PPGAEmitter
-from qdil.qd.loop import LoopState
+from qdil.qd.state import LoopState, Run
 from qdil.rewards.base import RewardModel
+from qdil.rewards.bonus import ExplorationBonus
 from qdil.rl.networks import VectorizedActor
 from qdil.rl.normalize import RunningMeanStd
 from qdil.rl.vppo import VPPO
 from qdil.tracking import Tracker
-
-
-@dataclass
-class Run:
-    """Everything a QD-IL run holds. Built by :func:`build_run`; looped by ``run_qd``."""
-
-    name: str
-    run_dir: Path
-    task: str
-    seed: int
-    qd: QDConfig
-    logging: LoggingConfig
-    env: LocomotionVectorEnv
-    eval_env: LocomotionVectorEnv
-    vppo: VPPO
-    reward: RewardModel
-    reward_optimizers: list[torch.optim.Optimizer]
-    fabric: L.Fabric
-    scheduler: Scheduler
-    emitter: EmitterBase
-    archives: RunArchives
-    demos: DemoSet | None
-    expert: TransitionBatch | None
-    state: LoopState
-    tracker: Tracker
-    config: dict[str, Any] = field(default_factory=dict)
-    """The resolved recipe; checkpoints store it so a resume can tell an edited config.yaml."""
 
 
 def _seeds(seed: int, count: int) -> list[int]:
@@ -169,16 +140,12 @@ def build_run(
     if optimizers:
         _, *optimizers = fabric.setup(model, *optimizers)
     if bonus.enabled:
-        from qdil.rewards.bonus import ExplorationBonus
-
         model = ExplorationBonus(model, weight=bonus.weight, cells=bonus.cells)
     demo_set = None
     if model.needs_demos:
         if demos.path is None:
             label = model.name or type(model).__name__
             raise ValueError(f"demos.path: the {label} reward model needs demonstrations")
-        from qdil.demos.io import load_demos
-
         demo_set = load_demos(demos.path, task=env.task, num_episodes=demos.num_episodes)
     model.setup(demo_set)
     if not resume:  # a resumed run's checkpoint holds the pretrained weights

@@ -18,15 +18,45 @@ import csv
 import math
 import os
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 from tqdm.auto import tqdm
 
-from qdil.qd.checkpoint import atomic_write
+from qdil.files import atomic_write
 
 if TYPE_CHECKING:
-    from qdil.config import LoggingConfig
-    from qdil.run import Run
+    from qdil.config import LoggingConfig, QDConfig
+    from qdil.qd.archives import RunArchives
+
+
+class _Counters(Protocol):
+    @property
+    def iteration(self) -> int:
+        """The current QD iteration."""
+
+
+class TrackedRun(Protocol):
+    """What the tracker reads of a run; :class:`qdil.qd.state.Run` has it.
+
+    A protocol rather than ``Run`` itself: the run holds its tracker, so naming ``Run`` here,
+    even for annotations, would make the two modules import each other.
+    """
+
+    @property
+    def name(self) -> str:
+        """The run's name (the title of heatmaps)."""
+
+    @property
+    def qd(self) -> QDConfig:
+        """Its QD settings (``iterations``: the last iteration gets a heatmap)."""
+
+    @property
+    def archives(self) -> RunArchives:
+        """Its archives (the true-return one is drawn and tabled)."""
+
+    @property
+    def state(self) -> _Counters:
+        """Its counters (``iteration``: the step of the final table)."""
 
 
 class MetricsCSV:
@@ -143,7 +173,7 @@ class Tracker:
         """A progress bar from ``start`` to ``total`` iterations."""
         return Progress(start, total, self.logging.progress)
 
-    def log(self, metrics: dict[str, float], iteration: int, run: Run) -> None:
+    def log(self, metrics: dict[str, float], iteration: int, run: TrackedRun) -> None:
         """Record one iteration's metrics (and the archive heatmap every K iterations)."""
         self.csv.write({"iteration": iteration, **metrics})
         if self.wandb is not None:
@@ -157,7 +187,7 @@ class Tracker:
                 )
                 self.wandb.log_image("archive/heatmap", [figure], step=iteration)
 
-    def finish(self, run: Run) -> None:
+    def finish(self, run: TrackedRun) -> None:
         """Log the final archive as a table and close W&B."""
         if self.wandb is None:
             return

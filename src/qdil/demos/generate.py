@@ -25,6 +25,7 @@ import yaml
 import qdil
 from qdil.demos.dataset import DemoSet
 from qdil.envs.vector import LocomotionVectorEnv
+from qdil.qd.checkpoint import load_archive
 from qdil.rl.collect import ActionMap, act
 from qdil.rl.networks import VectorizedActor
 from qdil.rl.normalize import RunningMeanStd
@@ -182,8 +183,6 @@ def demos_from_run(
     Raises:
         ValueError: if the archive holds no elites.
     """
-    from qdil.qd.checkpoint import load_archive
-
     run_dir = Path(run_dir)
     config = yaml.safe_load((run_dir / "config.yaml").read_text())
     archive, iteration = load_archive(run_dir, "true")

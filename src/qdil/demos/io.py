@@ -35,6 +35,7 @@ from typing import Any
 import numpy as np
 
 from qdil.demos.dataset import DemoSet
+from qdil.files import atomic_write
 
 FORMAT = "qdil-demos"
 VERSION = 1
@@ -118,8 +119,6 @@ def save_demos(
         qpos: optional (T, nq) MuJoCo positions of s_t.
         qvel: optional (T, nv) MuJoCo velocities of s_t.
     """
-    from qdil.qd.checkpoint import atomic_write
-
     ends = np.asarray(demos.episode_ends, dtype=np.int64)
     last = ends - 1
     header = {

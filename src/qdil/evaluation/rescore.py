@@ -23,8 +23,9 @@ import yaml
 from ribs.archives import GridArchive
 
 from qdil.envs.vector import LocomotionVectorEnv
+from qdil.files import atomic_write
 from qdil.qd.archives import QD_OFFSETS, elite_fields, make_grid, qd_metrics
-from qdil.qd.checkpoint import atomic_write, dumps_compact, load_archive
+from qdil.qd.checkpoint import dumps_compact, load_archive
 from qdil.rl.collect import evaluate_policies
 from qdil.rl.networks import VectorizedActor
 from qdil.rl.normalize import RunningMeanStd

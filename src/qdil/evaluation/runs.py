@@ -37,6 +37,7 @@ from ribs.archives import GridArchive
 
 from qdil.evaluation.rescore import CORRECTED, EVAL_JSON
 from qdil.qd.archives import QD_OFFSETS, qd_metrics
+from qdil.qd.checkpoint import CheckpointError, load_archive
 
 CONFIG_NAME = "config.yaml"
 METRICS_NAME = "metrics.csv"
@@ -238,8 +239,6 @@ def light_copy(archive: GridArchive) -> GridArchive:
 
 def _final_archive(run: RunResult) -> None:
     """Fill ``run``'s final archive, metrics and source (corrected archive preferred)."""
-    from qdil.qd.checkpoint import CheckpointError, load_archive
-
     try:
         archive, run.iteration = load_archive(run.path, "true")
     except CheckpointError as error:

@@ -21,9 +21,7 @@ and are resumed without the comparison.
 from __future__ import annotations
 
 import io
-import os
 import pickle
-import re
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -31,82 +29,20 @@ import numpy as np
 import torch
 from ribs.archives import ArrayStore
 
+from qdil.files import atomic_write
+
 if TYPE_CHECKING:
-    from qdil.run import Run
+    from qdil.qd.state import Run
 
 FORMAT_VERSION = 1
 CHECKPOINT = Path("checkpoints") / "last.pt"
 # Recipe keys a resume may change: they set how long the run goes on and what it writes,
 # not what it computes (physics threads change speed only).
 RESUMABLE_KEYS = ("qd.iterations", "env.num_threads", "logging")
-# atomic_write's temporary files: ".<name>.tmp-<pid>"
-_TEMPORARY = re.compile(r"^\..+\.tmp-(\d+)$")
 
 
 class CheckpointError(RuntimeError):
     """A checkpoint is missing, corrupt or from an incompatible run."""
-
-
-def atomic_write(path: Path, write: Any) -> None:
-    """Call ``write(file)`` on a temporary file, fsync it, then rename it over ``path``."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")  # see remove_stale_temporaries
-    try:
-        with open(tmp, "wb") as file:
-            write(file)
-            file.flush()
-            os.fsync(file.fileno())
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
-    directory = os.open(path.parent, os.O_RDONLY)
-    try:
-        os.fsync(directory)
-    finally:
-        os.close(directory)
-
-
-def _alive(pid: int) -> bool:
-    """Whether process ``pid`` exists (it may be another user's)."""
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    except (OverflowError, ValueError):  # not a possible pid
-        return False
-    return True
-
-
-def remove_stale_temporaries(run_dir: Path) -> list[Path]:
-    """Delete the temporary files that killed :func:`atomic_write` calls left in a run.
-
-    A write killed before its rename leaves ``.<name>.tmp-<pid>`` behind (for a checkpoint,
-    as large as the checkpoint). Files of a process that still runs are kept: another qdil
-    may be writing them right now.
-
-    Args:
-        run_dir: the run directory; it and its ``checkpoints`` folder are cleaned.
-
-    Returns:
-        The files removed.
-    """
-    removed = []
-    for folder in (run_dir, run_dir / CHECKPOINT.parent):
-        if not folder.is_dir():
-            continue
-        for path in folder.iterdir():
-            match = _TEMPORARY.match(path.name)
-            if match is None or not path.is_file():
-                continue
-            pid = int(match.group(1))
-            if pid != os.getpid() and _alive(pid):
-                continue
-            path.unlink(missing_ok=True)
-            removed.append(path)
-    return removed
 
 
 def _flatten(value: Any, prefix: str = "") -> dict[str, Any]:

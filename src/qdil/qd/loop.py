@@ -20,7 +20,7 @@ all reported metrics (decision D1).
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from functools import partial
 from typing import TYPE_CHECKING, Any
 
@@ -29,25 +29,12 @@ import torch
 
 from qdil.data import Rollout, TransitionBatch
 from qdil.qd.archives import QD_OFFSETS, qd_metrics
+from qdil.qd.checkpoint import save_checkpoint
 from qdil.rl.collect import Evaluation
 from qdil.rl.normalize import RunningMeanStd
 
 if TYPE_CHECKING:
-    from qdil.run import Run
-
-
-@dataclass
-class LoopState:
-    """Counters and the seed stream of a run; all of it goes into checkpoints."""
-
-    iteration: int = 0
-    env_steps: int = 0
-    seconds: float = 0.0
-    rng: np.random.Generator = field(default_factory=np.random.default_rng)
-
-    def next_seed(self) -> int:
-        """A fresh seed for the next environment reset."""
-        return int(self.rng.integers(2**31 - 1))
+    from qdil.qd.state import Run
 
 
 def stats_from_fields(fields: dict[str, np.ndarray]) -> RunningMeanStd:
@@ -231,8 +218,6 @@ def qd_iteration(run: Run) -> dict[str, float]:
 
 def run_qd(run: Run) -> None:
     """Run iterations until ``qd.iterations``, logging and checkpointing as configured."""
-    from qdil.qd.checkpoint import save_checkpoint
-
     progress = run.tracker.progress(run.state.iteration, run.qd.iterations)
     try:
         while run.state.iteration < run.qd.iterations:

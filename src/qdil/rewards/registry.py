@@ -22,10 +22,8 @@ import sys
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
 
-if TYPE_CHECKING:
-    from qdil.rewards.base import RewardModel
+from qdil.rewards.base import RewardModel
 
 ENTRY_POINT_GROUP = "qdil.rewards"
 LOCAL_PACKAGE = "qdil_local_plugins"
@@ -58,8 +56,6 @@ def register_reward(name: str) -> Callable[[type[RewardModel]], type[RewardModel
         TypeError: if the class is not a ``RewardModel`` subclass.
         ValueError: if another class already has the name.
     """
-    from qdil.rewards.base import RewardModel
-
     if not name.isidentifier() or name != name.lower():
         raise ValueError(f"reward names are lowercase identifiers, got {name!r}")
 
@@ -88,8 +84,6 @@ def _qualname(cls: type) -> str:
 
 def _load_entry_points() -> None:
     global _current_source
-    from qdil.rewards.base import RewardModel
-
     for entry_point in importlib.metadata.entry_points(group=ENTRY_POINT_GROUP):
         dist = entry_point.dist.name if entry_point.dist else "unknown package"
         _current_source = f"entry point {entry_point.name} ({dist})"

@@ -1,0 +1,71 @@
+"""What a run holds: its components (:class:`Run`) and the loop's counters (:class:`LoopState`).
+
+Plain containers, below everything that uses them: :func:`qdil.run.build_run` fills a
+``Run``, the QD loop iterates it, checkpoints save and restore it. The component types are
+imported for annotations only, so this module costs nothing at import and imports none of
+the modules that import it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+if TYPE_CHECKING:
+    import lightning as L
+    import torch
+    from ribs.emitters import EmitterBase
+    from ribs.schedulers import Scheduler
+
+    from qdil.config import LoggingConfig, QDConfig
+    from qdil.data import TransitionBatch
+    from qdil.demos.dataset import DemoSet
+    from qdil.envs.vector import LocomotionVectorEnv
+    from qdil.qd.archives import RunArchives
+    from qdil.rewards.base import RewardModel
+    from qdil.rl.vppo import VPPO
+    from qdil.tracking import Tracker
+
+
+@dataclass
+class LoopState:
+    """Counters and the seed stream of a run; all of it goes into checkpoints."""
+
+    iteration: int = 0
+    env_steps: int = 0
+    seconds: float = 0.0
+    rng: np.random.Generator = field(default_factory=np.random.default_rng)
+
+    def next_seed(self) -> int:
+        """A fresh seed for the next environment reset."""
+        return int(self.rng.integers(2**31 - 1))
+
+
+@dataclass
+class Run:
+    """Everything a QD-IL run holds. Built by :func:`~qdil.run.build_run`; looped by ``run_qd``."""
+
+    name: str
+    run_dir: Path
+    task: str
+    seed: int
+    qd: QDConfig
+    logging: LoggingConfig
+    env: LocomotionVectorEnv
+    eval_env: LocomotionVectorEnv
+    vppo: VPPO
+    reward: RewardModel
+    reward_optimizers: list[torch.optim.Optimizer]
+    fabric: L.Fabric
+    scheduler: Scheduler
+    emitter: EmitterBase
+    archives: RunArchives
+    demos: DemoSet | None
+    expert: TransitionBatch | None
+    state: LoopState
+    tracker: Tracker
+    config: dict[str, Any] = field(default_factory=dict)
+    """The resolved recipe; checkpoints store it so a resume can tell an edited config.yaml."""
