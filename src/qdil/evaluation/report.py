@@ -27,479 +27,67 @@ Files written into the output folder: ``report.md`` and ``report.html`` (everyth
 page), ``table.md`` / ``table.csv`` (main table), ``tukey.md`` / ``tukey.csv``,
 ``runs.csv`` (every run, its status and final metrics), ``heatmaps/*.png`` and
 ``curves/*.png``.
+
+The pieces: :mod:`qdil.evaluation.tables` (numbers), :mod:`qdil.evaluation.figures`
+(heatmaps and curves) and :mod:`qdil.evaluation.page` (the document); this module collects
+the runs and writes the files.
 """
 
 from __future__ import annotations
 
-import csv
-import math
-import re
-from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass
+from collections.abc import Iterable, Mapping
 from pathlib import Path
-from typing import Any
-
-import numpy as np
-from ribs.archives import GridArchive
 
 from qdil.evaluation import document as doc
+from qdil.evaluation.figures import (
+    CURVE_METRICS,
+    colour_range,
+    method_curves,
+    plot_curves,
+    plot_heatmaps,
+)
+from qdil.evaluation.page import Report, build_document
 from qdil.evaluation.runs import (
-    DISPLAY_NAMES,
-    Groups,
-    RunResult,
     collect_runs,
     flag_duplicate_seeds,
     group_runs,
 )
-from qdil.evaluation.stats import (
-    Comparison,
-    TukeyResult,
-    align_curves,
-    format_mean_std,
-    summarize,
-    tukey,
+from qdil.evaluation.tables import (
+    TABLE_METRICS,
+    format_pvalue,
+    main_table,
+    metric_values,
+    offset_table,
+    run_records,
+    table_records,
+    tukey_records,
+    tukey_table,
+    tukey_tests,
+    write_csv,
 )
 
-TABLE_METRICS: tuple[tuple[str, str, str, float], ...] = (
-    ("qd_score", "QD-Score", "sci", 1.0),
-    ("qd_score_offset", "QD-Score (offset)", "sci", 1.0),
-    ("coverage", "Cov(%)", "fixed", 100.0),
-    ("obj_max", "Best", "int", 1.0),
-    ("obj_mean", "Avg", "int", 1.0),
-)
-"""(metric key, column title, number style, scale) of the main table."""
-
-CURVE_METRICS: tuple[tuple[str, str, float], ...] = (
-    ("qd/qd_score", "QD-Score", 1.0),
-    ("qd/coverage", "coverage (%)", 100.0),
-    ("qd/obj_max", "best return", 1.0),
-    ("qd/obj_mean", "average return", 1.0),
-)
-"""(metrics.csv column, axis label, scale) of the learning curves."""
-
-
-def metric_values(runs: Sequence[RunResult], key: str, scale: float = 1.0) -> np.ndarray:
-    """One final metric of each run, shape ``(len(runs),)``."""
-    return np.array([scale * run.metrics.get(key, math.nan) for run in runs], dtype=np.float64)
-
-
-def _short(task: str) -> str:
-    return task.split("-v")[0]
-
-
-def _count(runs: Sequence[RunResult]) -> str:
-    """Seeds of a group, ``*`` if some are unfinished."""
-    if not runs:
-        return "–"
-    return f"{len(runs)}*" if any(run.unfinished for run in runs) else str(len(runs))
-
-
-def main_table(groups: Groups) -> tuple[list[str], list[list[str]]]:
-    """The paper's main table: rows = methods, per task n, QD-Score, Cov(%), Best, Avg.
-
-    Returns:
-        Header and rows of text cells (``mean ± std`` over seeds; ``n`` has a ``*`` when the
-        group includes unfinished runs).
-    """
-    columns = [m for m in TABLE_METRICS if m[0] != "qd_score_offset"]
-    header = ["Method"]
-    for task in groups:
-        header += [f"{_short(task)} n"] + [f"{_short(task)} {title}" for _, title, _, _ in columns]
-    methods = _methods(groups)
-    rows = []
-    for method in methods:
-        row = [method]
-        for runs_by_method in groups.values():
-            runs = runs_by_method.get(method, [])
-            row.append(_count(runs))
-            for key, _, style, scale in columns:
-                cell = format_mean_std(summarize(metric_values(runs, key, scale)), style)
-                row.append(cell if runs else "–")
-        rows.append(row)
-    return header, rows
-
-
-def offset_table(groups: Groups) -> tuple[list[str], list[list[str]]]:
-    """Offset QD-Score (PPGA's convention): rows = methods, one column per task."""
-    header = ["Method"] + [f"{_short(task)} QD-Score (offset)" for task in groups]
-    rows = []
-    for method in _methods(groups):
-        row = [method]
-        for runs_by_method in groups.values():
-            runs = runs_by_method.get(method, [])
-            summary = summarize(metric_values(runs, "qd_score_offset"))
-            row.append(format_mean_std(summary, "sci") if runs else "–")
-        rows.append(row)
-    return header, rows
-
-
-def _methods(groups: Groups) -> list[str]:
-    methods: list[str] = []
-    for runs_by_method in groups.values():
-        methods += [m for m in runs_by_method if m not in methods]
-    first = DISPLAY_NAMES["true_reward"]
-    return sorted(methods, key=lambda m: (not m.startswith(first), m.lower()))
-
-
-def table_records(groups: Groups) -> list[dict[str, Any]]:
-    """One record per task × method with mean, std and n of every table metric (CSV rows)."""
-    records = []
-    for task, runs_by_method in groups.items():
-        for method, runs in runs_by_method.items():
-            record: dict[str, Any] = {
-                "task": task,
-                "method": method,
-                "n": len(runs),
-                "seeds": " ".join(str(r.seed) for r in runs),
-                "unfinished": sum(r.unfinished for r in runs),
-                "corrected": sum(r.source.startswith("corrected") for r in runs),
-            }
-            for key, _, _, scale in TABLE_METRICS:
-                name = "coverage_pct" if key == "coverage" else key
-                summary = summarize(metric_values(runs, key, scale))
-                record[f"{name}_mean"], record[f"{name}_std"] = summary.mean, summary.std
-            records.append(record)
-    return records
-
-
-def tukey_tests(groups: Groups, reference: str | None = None) -> dict[str, TukeyResult]:
-    """Tukey HSD on the raw QD-Score between the methods of each task.
-
-    Args:
-        groups: included runs by task and method.
-        reference: keep only pairs with this method, oriented so that it is ``group2``
-            (the paper's layout: ``+`` means the reference is better).
-
-    Returns:
-        Task -> comparisons and notes.
-    """
-    results = {}
-    for task, runs_by_method in groups.items():
-        values = {m: metric_values(runs, "qd_score") for m, runs in runs_by_method.items()}
-        result = tukey(values)
-        if reference is not None:
-            result.comparisons = _orient(result.comparisons, reference)
-            if reference not in values:
-                result.notes.append(f"reference method {reference} has no runs on {task}")
-        results[task] = result
-    return results
-
-
-def _orient(comparisons: Sequence[Comparison], reference: str) -> list[Comparison]:
-    oriented = []
-    for c in comparisons:
-        if c.group2 == reference:
-            oriented.append(c)
-        elif c.group1 == reference:
-            oriented.append(
-                Comparison(c.group2, c.group1, c.mean2, c.mean1, -c.diff, c.pvalue, c.n2, c.n1)
-            )
-    return oriented
-
-
-def format_pvalue(pvalue: float) -> str:
-    """A p-value with 4 decimals, bold when ``p ≤ 0.05``."""
-    if not math.isfinite(pvalue):
-        return "nan"
-    text = f"{pvalue:.4f}" if pvalue >= 1e-4 else "<0.0001"
-    return f"**{text}**" if pvalue <= 0.05 else text
-
-
-def tukey_table(results: Mapping[str, TukeyResult]) -> tuple[list[str], list[list[str]]]:
-    """The paper's Tukey table: group1, group2, then sign and p-value for each task."""
-    pairs: list[tuple[str, str]] = []
-    for result in results.values():
-        pairs += [
-            (c.group1, c.group2) for c in result.comparisons if (c.group1, c.group2) not in pairs
-        ]
-    header = ["group1", "group2"]
-    for task in results:
-        header += [f"{_short(task)} sign", f"{_short(task)} p"]
-    rows = []
-    for pair in pairs:
-        row = list(pair)
-        for result in results.values():
-            found = [c for c in result.comparisons if (c.group1, c.group2) == pair]
-            row += [found[0].sign, format_pvalue(found[0].pvalue)] if found else ["–", "–"]
-        rows.append(row)
-    return header, rows
-
-
-def tukey_records(results: Mapping[str, TukeyResult]) -> list[dict[str, Any]]:
-    """One record per task and pair (CSV rows)."""
-    return [
-        {
-            "task": task,
-            "group1": c.group1,
-            "group2": c.group2,
-            "n1": c.n1,
-            "n2": c.n2,
-            "mean1": c.mean1,
-            "mean2": c.mean2,
-            "diff": c.diff,
-            "sign": c.sign,
-            "pvalue": c.pvalue,
-            "significant": c.significant,
-        }
-        for task, result in results.items()
-        for c in result.comparisons
-    ]
-
-
-def _slug(text: str) -> str:
-    return re.sub(r"[^A-Za-z0-9_.-]+", "_", text).strip("_") or "run"
-
-
-def colour_range(archives: Iterable[GridArchive | None]) -> tuple[float | None, float | None]:
-    """Smallest and largest objective over archives: one colour scale for a task."""
-    objectives = [a.data("objective") for a in archives if a is not None and len(a)]
-    if not objectives:
-        return None, None
-    values = np.concatenate(objectives)
-    return float(values.min()), float(values.max())
-
-
-def plot_heatmaps(groups: Groups, out: Path) -> dict[Path, str]:
-    """Save a heatmap of every run's final archive under ``out/heatmaps``.
-
-    Returns:
-        Run directory -> PNG path relative to ``out``.
-    """
-    import matplotlib.pyplot as plt
-
-    from qdil.evaluation.plots import archive_heatmap
-
-    (out / "heatmaps").mkdir(parents=True, exist_ok=True)
-    made: dict[Path, str] = {}
-    for task, runs_by_method in groups.items():
-        vmin, vmax = colour_range(r.archive for runs in runs_by_method.values() for r in runs)
-        for method, runs in runs_by_method.items():
-            for run in runs:
-                name = f"heatmaps/{_slug(task)}__{_slug(method)}__{_slug(run.path.name)}"
-                while f"{name}.png" in made.values():
-                    name += "_"
-                title = f"{method} · seed {run.seed} · {task}\n{run.source}"
-                try:
-                    figure = archive_heatmap(run.archive, title=title, vmin=vmin, vmax=vmax)
-                except ValueError as error:  # pyribs draws 1-D and 2-D grids only
-                    run.notes.append(f"no heatmap: {error}")
-                    continue
-                figure.savefig(out / f"{name}.png", dpi=100)
-                plt.close(figure)
-                made[run.path] = f"{name}.png"
-    return made
-
-
-def method_curves(
-    runs: Sequence[RunResult], key: str, scale: float = 1.0
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Mean and std over a method's seeds of one ``metrics.csv`` column.
-
-    Returns:
-        ``(iterations, mean, std)``, shapes ``(T,)``, on the iterations all seeds have.
-    """
-    curves = [(r.curves[key][0], scale * r.curves[key][1]) for r in runs if key in r.curves]
-    if len(curves) < len(runs):
-        return np.zeros(0), np.zeros(0), np.zeros(0)
-    return align_curves(curves)
-
-
-def plot_curves(groups: Groups, out: Path) -> dict[str, list[tuple[str, str]]]:
-    """Save learning curves (one PNG per task and metric) under ``out/curves``.
-
-    Returns:
-        Task -> ``(metric label, PNG path relative to out)`` pairs.
-    """
-    import matplotlib.pyplot as plt
-
-    from qdil.evaluation.plots import learning_curves
-
-    (out / "curves").mkdir(parents=True, exist_ok=True)
-    made: dict[str, list[tuple[str, str]]] = {}
-    for task, runs_by_method in groups.items():
-        for key, label, scale in CURVE_METRICS:
-            lines = {}
-            for method, runs in runs_by_method.items():
-                steps, mean, std = method_curves(runs, key, scale)
-                if len(steps):
-                    lines[method] = (steps, mean, std, len(runs))
-            figure = learning_curves(lines, title=f"{task}: {label}", ylabel=label)
-            name = f"curves/{_slug(task)}__{_slug(key.split('/')[-1])}.png"
-            figure.savefig(out / name, dpi=100)
-            plt.close(figure)
-            made.setdefault(task, []).append((label, name))
-    return made
-
-
-def run_records(runs: Sequence[RunResult]) -> list[dict[str, Any]]:
-    """One record per run directory, left out ones included (``runs.csv`` rows)."""
-    records = []
-    for run in runs:
-        record: dict[str, Any] = {
-            "path": str(run.path),
-            "task": run.task or "",
-            "method": run.method or "",
-            "seed": "" if run.seed is None else run.seed,
-            "status": run.status,
-            "iteration": "" if run.iteration is None else run.iteration,
-            "last_logged": "" if run.last_logged is None else run.last_logged,
-            "target": "" if run.target is None else run.target,
-            "source": run.source,
-            "reason": "; ".join(run.problems + run.notes),
-        }
-        for key, _, _, scale in (*TABLE_METRICS, ("num_elites", "", "", 1.0)):
-            name = "coverage_pct" if key == "coverage" else key
-            record[name] = scale * run.metrics[key] if key in run.metrics else ""
-        records.append(record)
-    return records
-
-
-def write_csv(path: Path, records: Sequence[Mapping[str, Any]], header: Sequence[str]) -> None:
-    """Write records as CSV (floats at full precision)."""
-    with open(path, "w", newline="") as file:
-        writer = csv.DictWriter(file, fieldnames=list(header))
-        writer.writeheader()
-        writer.writerows(records)
-
-
-@dataclass
-class Report:
-    """What :func:`write_report` made.
-
-    Attributes:
-        out: the output folder.
-        runs: every run found (included and left out).
-        groups: included runs by task and method.
-        tukey: Tukey HSD results by task.
-        main_table: the main table as Markdown.
-        files: every file written, relative to ``out``.
-    """
-
-    out: Path
-    runs: list[RunResult]
-    groups: Groups
-    tukey: dict[str, TukeyResult]
-    main_table: str
-    files: list[str]
-
-
-def _problem_rows(runs: Sequence[RunResult]) -> list[list[str]]:
-    return [
-        [f"`{run.path}`", run.status, "; ".join(run.problems + run.notes)]
-        for run in runs
-        if not run.included or run.unfinished or run.notes
-    ]
-
-
-def _image_rows(
-    groups: Groups, task: str, heatmaps: Mapping[Path, str]
-) -> tuple[list[str], list[list[str]]]:
-    runs_by_method = groups[task]
-    width = max(len(runs) for runs in runs_by_method.values())
-    header = ["Method"] + [f"run {i + 1}" for i in range(width)]
-    rows = []
-    for method, runs in runs_by_method.items():
-        cells = [
-            f"![{method} seed {r.seed}]({heatmaps[r.path]})" if r.path in heatmaps else "–"
-            for r in runs
-        ]
-        rows.append([method, *cells, *[""] * (width - len(cells))])
-    return header, rows
-
-
-def _sources(groups: Groups) -> list[str]:
-    lines = []
-    for task, runs_by_method in groups.items():
-        for method, runs in runs_by_method.items():
-            corrected = sum(r.source.startswith("corrected") for r in runs)
-            lines.append(
-                f"{task} / {method}: {corrected} of {len(runs)} run(s) from corrected archives "
-                f"(`qdil eval`), {len(runs) - corrected} from training archives"
-            )
-    return lines
-
-
-def build_document(
-    report: Report, heatmaps: Mapping[Path, str], curves: Mapping[str, list[tuple[str, str]]]
-) -> list[doc.Block]:
-    """The blocks of ``report.md`` / ``report.html``."""
-    runs, groups = report.runs, report.groups
-    included = [r for r in runs if r.included]
-    blocks = [
-        doc.heading("qdil report", 1),
-        doc.text(
-            f"{len(runs)} run(s): {len(included)} included "
-            f"({sum(r.unfinished for r in included)} unfinished), "
-            f"{len(runs) - len(included)} left out. Numbers are mean ± sample std "
-            "(ddof=1) over seeds; QD-Score is the raw sum of true returns (QDIL/WQDIL papers), "
-            "the offset QD-Score adds PPGA's per-step offset × episode length; Cov is the "
-            "percentage of filled cells, Best and Avg the best and mean elite returns."
-        ),
-        doc.heading("Main results"),
-    ]
-    if groups:
-        blocks += [doc.table(*main_table(groups))]
-        blocks += [doc.text("n with `*`: the group includes unfinished runs (see below).")]
-        blocks += [doc.heading("Offset QD-Score (PPGA convention)", 3)]
-        blocks += [doc.table(*offset_table(groups))]
-        blocks += [doc.heading("Sources of the final metrics", 3), doc.bullets(_sources(groups))]
-    else:
-        blocks += [doc.text("No run could be included.")]
-    blocks += [doc.heading("Tukey HSD test of the raw QD-Score")]
-    blocks += [
-        doc.text(
-            "Sign: `+` when group2's mean is higher than group1's. Bold: p ≤ 0.05 (Tukey-adjusted)."
-        )
-    ]
-    header, rows = tukey_table(report.tukey)
-    blocks += [doc.table(header, rows)] if rows else [doc.text("No pair could be tested.")]
-    notes = [f"{task}: {note}" for task, res in report.tukey.items() for note in res.notes]
-    blocks += [doc.bullets(notes)] if notes else []
-    blocks += [doc.heading("Learning curves")]
-    blocks += [
-        doc.text(
-            "Training archive (`metrics.csv`), mean over seeds with a ±std band; each method "
-            "on the iterations all of its seeds logged."
-        )
-    ]
-    for task, images in curves.items():
-        blocks += [doc.heading(task, 3), doc.table(*_curve_row(images))]
-    blocks += [doc.heading("Archive heatmaps")]
-    for task in groups:
-        vmin, vmax = colour_range(r.archive for rs in groups[task].values() for r in rs)
-        scale = "empty archives" if vmin is None else f"colour scale {vmin:.4g} to {vmax:.4g}"
-        blocks += [doc.heading(task, 3), doc.text(f"Final archives; {scale} for every run.")]
-        blocks += [doc.table(*_image_rows(groups, task, heatmaps))]
-    blocks += [doc.heading("Runs"), doc.table(*_runs_table(runs))]
-    blocks += [doc.heading("Runs left out / unfinished")]
-    blocks += [
-        doc.text("Also listed: included runs with remarks (stale `eval.json`, shared seeds).")
-    ]
-    problems = _problem_rows(runs)
-    header = ["run", "status", "reason"]
-    blocks += [doc.table(header, problems)] if problems else [doc.text("None.")]
-    return blocks
-
-
-def _curve_row(images: Sequence[tuple[str, str]]) -> tuple[list[str], list[list[str]]]:
-    return [label for label, _ in images], [[f"![{label}]({path})" for label, path in images]]
-
-
-def _runs_table(runs: Sequence[RunResult]) -> tuple[list[str], list[list[str]]]:
-    header = ["run", "task", "method", "seed", "iteration", "status", "source"]
-    rows = [
-        [
-            f"`{run.path}`",
-            run.task or "–",
-            run.method or "–",
-            "–" if run.seed is None else str(run.seed),
-            f"{run.iteration if run.iteration is not None else '–'} / {run.target or '–'}",
-            run.status,
-            run.source or "–",
-        ]
-        for run in runs
-    ]
-    return header, rows
+# the report's public names, importable from here as before the split
+__all__ = [
+    "CURVE_METRICS",
+    "TABLE_METRICS",
+    "Report",
+    "build_document",
+    "colour_range",
+    "format_pvalue",
+    "main_table",
+    "method_curves",
+    "metric_values",
+    "offset_table",
+    "plot_curves",
+    "plot_heatmaps",
+    "run_records",
+    "table_records",
+    "tukey_records",
+    "tukey_table",
+    "tukey_tests",
+    "write_csv",
+    "write_report",
+]
 
 
 def write_report(

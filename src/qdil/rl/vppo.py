@@ -37,7 +37,7 @@ Implementation details, with PPGA's quirks (``ppga_qdil.md`` §1.9) decided deli
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 import torch
@@ -45,9 +45,9 @@ import torch
 from qdil.data import Rollout
 from qdil.envs.vector import LocomotionVectorEnv
 from qdil.rl.collect import Collector, Evaluation, PolicyData, evaluate_policies
-from qdil.rl.gae import compute_gae
 from qdil.rl.networks import VectorizedActor, VectorizedCritic
 from qdil.rl.normalize import RunningMeanStd
+from qdil.rl.ppo import PPOSettings, ppo_update
 
 RewardFn = Callable[[Rollout], torch.Tensor]
 
@@ -69,20 +69,6 @@ class PhaseResult:
     rollouts: list[Rollout]
     diagnostics: dict[str, float]
     env_steps: int
-
-
-def _to_policies(x: torch.Tensor, num_policies: int) -> torch.Tensor:
-    """(T, N, ...) -> (P, N/P · T, ...): policy i's environments, env-major."""
-    steps, n = x.shape[:2]
-    x = x.transpose(0, 1).reshape(num_policies, n // num_policies, steps, *x.shape[2:])
-    return x.flatten(1, 2)
-
-
-def _from_policies(x: torch.Tensor, steps: int) -> torch.Tensor:
-    """Inverse of :func:`_to_policies`: (P, N/P · T, ...) -> (T, N, ...)."""
-    num_policies = x.shape[0]
-    x = x.reshape(num_policies, -1, steps, *x.shape[2:]).flatten(0, 1)
-    return x.transpose(0, 1)
 
 
 class VPPO:
@@ -381,93 +367,20 @@ class VPPO:
         pdata: PolicyData,
         rewards: torch.Tensor,
     ) -> dict[str, float]:
-        """One PPO iteration: GAE on the rollout, then minibatch epochs. Returns diagnostics."""
-        num_policies, steps = actor.num_models, rollout.num_steps
-        obs = _to_policies(pdata.norm_obs, num_policies)
-        next_obs = _to_policies(pdata.norm_next_obs, num_policies)
-        # ---- values and GAE (in reward units; the critic works in normalised units)
-        with torch.no_grad():
-            values, next_values = critic(obs), critic(next_obs)
-            if self.normalize_returns:
-                values = return_stats.denormalize(values)
-                next_values = return_stats.denormalize(next_values)
-            terminated = rollout.terminated if self.bootstrap_truncation else rollout.dones
-            advantages, returns = compute_gae(
-                rewards,
-                _from_policies(values, steps),
-                _from_policies(next_values, steps),
-                rollout.dones,
-                terminated,
-                self.gamma,
-                self.gae_lambda,
-            )
-            returns = _to_policies(returns, num_policies)
-            if self.normalize_returns:
-                return_stats.update(returns)
-                returns = return_stats.normalize(returns)
-                values = return_stats.normalize(values)
-        advantages = _to_policies(advantages, num_policies)
-        actions = _to_policies(pdata.actions, num_policies)
-        old_log_probs = _to_policies(pdata.log_probs, num_policies)
-
-        # ---- minibatch epochs
-        batch = obs.shape[1]
-        minibatch = max(1, batch // self.num_minibatches)
-        stats: dict[str, list[float]] = {
-            k: [] for k in ("policy_loss", "value_loss", "entropy", "approx_kl", "clipfrac")
-        }
-        epochs = 0
-        for _ in range(self.update_epochs):
-            epochs += 1
-            order = torch.randperm(batch, generator=self.generator)
-            for start in range(0, batch - minibatch + 1, minibatch):
-                idx = order[start : start + minibatch]
-                dist = actor.distribution(obs[:, idx])
-                new_log_probs = dist.log_prob(actions[:, idx]).sum(-1)
-                log_ratio = new_log_probs - old_log_probs[:, idx]
-                ratio = log_ratio.exp()
-                with torch.no_grad():
-                    approx_kl = ((ratio - 1) - log_ratio).mean(1)
-                    clipfrac = ((ratio - 1).abs() > self.clip_coef).float().mean(1)
-                adv = advantages[:, idx]
-                adv = (adv - adv.mean(1, keepdim=True)) / (adv.std(1, keepdim=True) + 1e-8)
-                pg_loss = torch.max(
-                    -adv * ratio, -adv * ratio.clamp(1 - self.clip_coef, 1 + self.clip_coef)
-                ).mean(1)
-                new_values = critic(obs[:, idx])
-                v_loss = (new_values - returns[:, idx]).square()
-                if self.value_clip is not None:
-                    clipped = values[:, idx] + (new_values - values[:, idx]).clamp(
-                        -self.value_clip, self.value_clip
-                    )
-                    v_loss = torch.max(v_loss, (clipped - returns[:, idx]).square())
-                v_loss = 0.5 * v_loss.mean(1)
-                entropy = dist.entropy().sum(-1).mean(1)
-                # a sum over policies keeps their gradients independent
-                loss = (pg_loss - self.ent_coef * entropy + self.vf_coef * v_loss).sum()
-                actor_opt.zero_grad()
-                critic_opt.zero_grad()
-                loss.backward()
-                actor.clip_grad_norm_per_model(self.max_grad_norm)
-                critic.clip_grad_norm_per_model(self.max_grad_norm)
-                actor_opt.step()
-                critic_opt.step()
-                step_stats = {
-                    "policy_loss": pg_loss,
-                    "value_loss": v_loss,
-                    "entropy": entropy,
-                    "approx_kl": approx_kl,
-                    "clipfrac": clipfrac,
-                }
-                for key, value in step_stats.items():
-                    stats[key].append(float(value.detach().mean()))
-            if self.target_kl is not None and float(approx_kl.mean()) > self.target_kl:
-                break
-        with torch.no_grad():
-            explained = 1 - (returns - values).var() / (returns.var() + 1e-8)
-        out = {key: float(np.mean(values_)) for key, values_ in stats.items()}
-        out.update(explained_variance=float(explained), epochs=float(epochs))
-        return out
+        """One PPO iteration with this estimator's settings (:func:`qdil.rl.ppo.ppo_update`)."""
+        settings = PPOSettings(**{f.name: getattr(self, f.name) for f in fields(PPOSettings)})
+        return ppo_update(
+            settings,
+            self.generator,
+            actor,
+            actor_opt,
+            critic,
+            critic_opt,
+            return_stats,
+            rollout,
+            pdata,
+            rewards,
+        )
 
     # ------------------------------------------------------------ checkpoints
     def state_dict(self) -> dict:

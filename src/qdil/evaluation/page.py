@@ -1,0 +1,163 @@
+"""The report page: :class:`Report` (what ``write_report`` made) and its document blocks.
+
+:func:`build_document` lays out ``report.md`` / ``report.html``: the main and offset tables,
+the sources of the metrics, the Tukey table, learning curves, heatmaps, the run list and the
+runs left out or unfinished.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+from qdil.evaluation import document as doc
+from qdil.evaluation.figures import colour_range
+from qdil.evaluation.runs import (
+    Groups,
+    RunResult,
+)
+from qdil.evaluation.stats import (
+    TukeyResult,
+)
+from qdil.evaluation.tables import main_table, offset_table, tukey_table
+
+
+@dataclass
+class Report:
+    """What :func:`write_report` made.
+
+    Attributes:
+        out: the output folder.
+        runs: every run found (included and left out).
+        groups: included runs by task and method.
+        tukey: Tukey HSD results by task.
+        main_table: the main table as Markdown.
+        files: every file written, relative to ``out``.
+    """
+
+    out: Path
+    runs: list[RunResult]
+    groups: Groups
+    tukey: dict[str, TukeyResult]
+    main_table: str
+    files: list[str]
+
+
+def _problem_rows(runs: Sequence[RunResult]) -> list[list[str]]:
+    return [
+        [f"`{run.path}`", run.status, "; ".join(run.problems + run.notes)]
+        for run in runs
+        if not run.included or run.unfinished or run.notes
+    ]
+
+
+def _image_rows(
+    groups: Groups, task: str, heatmaps: Mapping[Path, str]
+) -> tuple[list[str], list[list[str]]]:
+    runs_by_method = groups[task]
+    width = max(len(runs) for runs in runs_by_method.values())
+    header = ["Method"] + [f"run {i + 1}" for i in range(width)]
+    rows = []
+    for method, runs in runs_by_method.items():
+        cells = [
+            f"![{method} seed {r.seed}]({heatmaps[r.path]})" if r.path in heatmaps else "–"
+            for r in runs
+        ]
+        rows.append([method, *cells, *[""] * (width - len(cells))])
+    return header, rows
+
+
+def _sources(groups: Groups) -> list[str]:
+    lines = []
+    for task, runs_by_method in groups.items():
+        for method, runs in runs_by_method.items():
+            corrected = sum(r.source.startswith("corrected") for r in runs)
+            lines.append(
+                f"{task} / {method}: {corrected} of {len(runs)} run(s) from corrected archives "
+                f"(`qdil eval`), {len(runs) - corrected} from training archives"
+            )
+    return lines
+
+
+def build_document(
+    report: Report, heatmaps: Mapping[Path, str], curves: Mapping[str, list[tuple[str, str]]]
+) -> list[doc.Block]:
+    """The blocks of ``report.md`` / ``report.html``."""
+    runs, groups = report.runs, report.groups
+    included = [r for r in runs if r.included]
+    blocks = [
+        doc.heading("qdil report", 1),
+        doc.text(
+            f"{len(runs)} run(s): {len(included)} included "
+            f"({sum(r.unfinished for r in included)} unfinished), "
+            f"{len(runs) - len(included)} left out. Numbers are mean ± sample std "
+            "(ddof=1) over seeds; QD-Score is the raw sum of true returns (QDIL/WQDIL papers), "
+            "the offset QD-Score adds PPGA's per-step offset × episode length; Cov is the "
+            "percentage of filled cells, Best and Avg the best and mean elite returns."
+        ),
+        doc.heading("Main results"),
+    ]
+    if groups:
+        blocks += [doc.table(*main_table(groups))]
+        blocks += [doc.text("n with `*`: the group includes unfinished runs (see below).")]
+        blocks += [doc.heading("Offset QD-Score (PPGA convention)", 3)]
+        blocks += [doc.table(*offset_table(groups))]
+        blocks += [doc.heading("Sources of the final metrics", 3), doc.bullets(_sources(groups))]
+    else:
+        blocks += [doc.text("No run could be included.")]
+    blocks += [doc.heading("Tukey HSD test of the raw QD-Score")]
+    blocks += [
+        doc.text(
+            "Sign: `+` when group2's mean is higher than group1's. Bold: p ≤ 0.05 (Tukey-adjusted)."
+        )
+    ]
+    header, rows = tukey_table(report.tukey)
+    blocks += [doc.table(header, rows)] if rows else [doc.text("No pair could be tested.")]
+    notes = [f"{task}: {note}" for task, res in report.tukey.items() for note in res.notes]
+    blocks += [doc.bullets(notes)] if notes else []
+    blocks += [doc.heading("Learning curves")]
+    blocks += [
+        doc.text(
+            "Training archive (`metrics.csv`), mean over seeds with a ±std band; each method "
+            "on the iterations all of its seeds logged."
+        )
+    ]
+    for task, images in curves.items():
+        blocks += [doc.heading(task, 3), doc.table(*_curve_row(images))]
+    blocks += [doc.heading("Archive heatmaps")]
+    for task in groups:
+        vmin, vmax = colour_range(r.archive for rs in groups[task].values() for r in rs)
+        scale = "empty archives" if vmin is None else f"colour scale {vmin:.4g} to {vmax:.4g}"
+        blocks += [doc.heading(task, 3), doc.text(f"Final archives; {scale} for every run.")]
+        blocks += [doc.table(*_image_rows(groups, task, heatmaps))]
+    blocks += [doc.heading("Runs"), doc.table(*_runs_table(runs))]
+    blocks += [doc.heading("Runs left out / unfinished")]
+    blocks += [
+        doc.text("Also listed: included runs with remarks (stale `eval.json`, shared seeds).")
+    ]
+    problems = _problem_rows(runs)
+    header = ["run", "status", "reason"]
+    blocks += [doc.table(header, problems)] if problems else [doc.text("None.")]
+    return blocks
+
+
+def _curve_row(images: Sequence[tuple[str, str]]) -> tuple[list[str], list[list[str]]]:
+    return [label for label, _ in images], [[f"![{label}]({path})" for label, path in images]]
+
+
+def _runs_table(runs: Sequence[RunResult]) -> tuple[list[str], list[list[str]]]:
+    header = ["run", "task", "method", "seed", "iteration", "status", "source"]
+    rows = [
+        [
+            f"`{run.path}`",
+            run.task or "–",
+            run.method or "–",
+            "–" if run.seed is None else str(run.seed),
+            f"{run.iteration if run.iteration is not None else '–'} / {run.target or '–'}",
+            run.status,
+            run.source or "–",
+        ]
+        for run in runs
+    ]
+    return header, rows

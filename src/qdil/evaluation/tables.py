@@ -1,0 +1,236 @@
+"""The report's numbers: the main table, Tukey HSD tests, and the rows of its CSV files.
+
+Rows are mean ± sample std over seeds of each method's final metrics (:mod:`qdil.evaluation.report`
+says which runs and which archives); the Tukey HSD test compares the raw QD-Scores.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from qdil.evaluation.runs import (
+    DISPLAY_NAMES,
+    Groups,
+    RunResult,
+)
+from qdil.evaluation.stats import (
+    Comparison,
+    TukeyResult,
+    format_mean_std,
+    summarize,
+    tukey,
+)
+
+TABLE_METRICS: tuple[tuple[str, str, str, float], ...] = (
+    ("qd_score", "QD-Score", "sci", 1.0),
+    ("qd_score_offset", "QD-Score (offset)", "sci", 1.0),
+    ("coverage", "Cov(%)", "fixed", 100.0),
+    ("obj_max", "Best", "int", 1.0),
+    ("obj_mean", "Avg", "int", 1.0),
+)
+"""(metric key, column title, number style, scale) of the main table."""
+
+
+def metric_values(runs: Sequence[RunResult], key: str, scale: float = 1.0) -> np.ndarray:
+    """One final metric of each run, shape ``(len(runs),)``."""
+    return np.array([scale * run.metrics.get(key, math.nan) for run in runs], dtype=np.float64)
+
+
+def _short(task: str) -> str:
+    return task.split("-v")[0]
+
+
+def _count(runs: Sequence[RunResult]) -> str:
+    """Seeds of a group, ``*`` if some are unfinished."""
+    if not runs:
+        return "–"
+    return f"{len(runs)}*" if any(run.unfinished for run in runs) else str(len(runs))
+
+
+def main_table(groups: Groups) -> tuple[list[str], list[list[str]]]:
+    """The paper's main table: rows = methods, per task n, QD-Score, Cov(%), Best, Avg.
+
+    Returns:
+        Header and rows of text cells (``mean ± std`` over seeds; ``n`` has a ``*`` when the
+        group includes unfinished runs).
+    """
+    columns = [m for m in TABLE_METRICS if m[0] != "qd_score_offset"]
+    header = ["Method"]
+    for task in groups:
+        header += [f"{_short(task)} n"] + [f"{_short(task)} {title}" for _, title, _, _ in columns]
+    methods = _methods(groups)
+    rows = []
+    for method in methods:
+        row = [method]
+        for runs_by_method in groups.values():
+            runs = runs_by_method.get(method, [])
+            row.append(_count(runs))
+            for key, _, style, scale in columns:
+                cell = format_mean_std(summarize(metric_values(runs, key, scale)), style)
+                row.append(cell if runs else "–")
+        rows.append(row)
+    return header, rows
+
+
+def offset_table(groups: Groups) -> tuple[list[str], list[list[str]]]:
+    """Offset QD-Score (PPGA's convention): rows = methods, one column per task."""
+    header = ["Method"] + [f"{_short(task)} QD-Score (offset)" for task in groups]
+    rows = []
+    for method in _methods(groups):
+        row = [method]
+        for runs_by_method in groups.values():
+            runs = runs_by_method.get(method, [])
+            summary = summarize(metric_values(runs, "qd_score_offset"))
+            row.append(format_mean_std(summary, "sci") if runs else "–")
+        rows.append(row)
+    return header, rows
+
+
+def _methods(groups: Groups) -> list[str]:
+    methods: list[str] = []
+    for runs_by_method in groups.values():
+        methods += [m for m in runs_by_method if m not in methods]
+    first = DISPLAY_NAMES["true_reward"]
+    return sorted(methods, key=lambda m: (not m.startswith(first), m.lower()))
+
+
+def table_records(groups: Groups) -> list[dict[str, Any]]:
+    """One record per task × method with mean, std and n of every table metric (CSV rows)."""
+    records = []
+    for task, runs_by_method in groups.items():
+        for method, runs in runs_by_method.items():
+            record: dict[str, Any] = {
+                "task": task,
+                "method": method,
+                "n": len(runs),
+                "seeds": " ".join(str(r.seed) for r in runs),
+                "unfinished": sum(r.unfinished for r in runs),
+                "corrected": sum(r.source.startswith("corrected") for r in runs),
+            }
+            for key, _, _, scale in TABLE_METRICS:
+                name = "coverage_pct" if key == "coverage" else key
+                summary = summarize(metric_values(runs, key, scale))
+                record[f"{name}_mean"], record[f"{name}_std"] = summary.mean, summary.std
+            records.append(record)
+    return records
+
+
+def tukey_tests(groups: Groups, reference: str | None = None) -> dict[str, TukeyResult]:
+    """Tukey HSD on the raw QD-Score between the methods of each task.
+
+    Args:
+        groups: included runs by task and method.
+        reference: keep only pairs with this method, oriented so that it is ``group2``
+            (the paper's layout: ``+`` means the reference is better).
+
+    Returns:
+        Task -> comparisons and notes.
+    """
+    results = {}
+    for task, runs_by_method in groups.items():
+        values = {m: metric_values(runs, "qd_score") for m, runs in runs_by_method.items()}
+        result = tukey(values)
+        if reference is not None:
+            result.comparisons = _orient(result.comparisons, reference)
+            if reference not in values:
+                result.notes.append(f"reference method {reference} has no runs on {task}")
+        results[task] = result
+    return results
+
+
+def _orient(comparisons: Sequence[Comparison], reference: str) -> list[Comparison]:
+    oriented = []
+    for c in comparisons:
+        if c.group2 == reference:
+            oriented.append(c)
+        elif c.group1 == reference:
+            oriented.append(
+                Comparison(c.group2, c.group1, c.mean2, c.mean1, -c.diff, c.pvalue, c.n2, c.n1)
+            )
+    return oriented
+
+
+def format_pvalue(pvalue: float) -> str:
+    """A p-value with 4 decimals, bold when ``p ≤ 0.05``."""
+    if not math.isfinite(pvalue):
+        return "nan"
+    text = f"{pvalue:.4f}" if pvalue >= 1e-4 else "<0.0001"
+    return f"**{text}**" if pvalue <= 0.05 else text
+
+
+def tukey_table(results: Mapping[str, TukeyResult]) -> tuple[list[str], list[list[str]]]:
+    """The paper's Tukey table: group1, group2, then sign and p-value for each task."""
+    pairs: list[tuple[str, str]] = []
+    for result in results.values():
+        pairs += [
+            (c.group1, c.group2) for c in result.comparisons if (c.group1, c.group2) not in pairs
+        ]
+    header = ["group1", "group2"]
+    for task in results:
+        header += [f"{_short(task)} sign", f"{_short(task)} p"]
+    rows = []
+    for pair in pairs:
+        row = list(pair)
+        for result in results.values():
+            found = [c for c in result.comparisons if (c.group1, c.group2) == pair]
+            row += [found[0].sign, format_pvalue(found[0].pvalue)] if found else ["–", "–"]
+        rows.append(row)
+    return header, rows
+
+
+def tukey_records(results: Mapping[str, TukeyResult]) -> list[dict[str, Any]]:
+    """One record per task and pair (CSV rows)."""
+    return [
+        {
+            "task": task,
+            "group1": c.group1,
+            "group2": c.group2,
+            "n1": c.n1,
+            "n2": c.n2,
+            "mean1": c.mean1,
+            "mean2": c.mean2,
+            "diff": c.diff,
+            "sign": c.sign,
+            "pvalue": c.pvalue,
+            "significant": c.significant,
+        }
+        for task, result in results.items()
+        for c in result.comparisons
+    ]
+
+
+def run_records(runs: Sequence[RunResult]) -> list[dict[str, Any]]:
+    """One record per run directory, left out ones included (``runs.csv`` rows)."""
+    records = []
+    for run in runs:
+        record: dict[str, Any] = {
+            "path": str(run.path),
+            "task": run.task or "",
+            "method": run.method or "",
+            "seed": "" if run.seed is None else run.seed,
+            "status": run.status,
+            "iteration": "" if run.iteration is None else run.iteration,
+            "last_logged": "" if run.last_logged is None else run.last_logged,
+            "target": "" if run.target is None else run.target,
+            "source": run.source,
+            "reason": "; ".join(run.problems + run.notes),
+        }
+        for key, _, _, scale in (*TABLE_METRICS, ("num_elites", "", "", 1.0)):
+            name = "coverage_pct" if key == "coverage" else key
+            record[name] = scale * run.metrics[key] if key in run.metrics else ""
+        records.append(record)
+    return records
+
+
+def write_csv(path: Path, records: Sequence[Mapping[str, Any]], header: Sequence[str]) -> None:
+    """Write records as CSV (floats at full precision)."""
+    with open(path, "w", newline="") as file:
+        writer = csv.DictWriter(file, fieldnames=list(header))
+        writer.writeheader()
+        writer.writerows(records)

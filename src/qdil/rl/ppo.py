@@ -1,0 +1,170 @@
+"""One PPO iteration for P policies side by side: the core that both VPPO phases share.
+
+:class:`~qdil.rl.vppo.VPPO` documents the choices (per-objective value normalisation,
+per-minibatch advantage normalisation, clipped surrogate and value loss, per-policy gradient
+clipping, early stop on the approximate KL); this module holds the update itself and the
+layout helpers between time-major rollouts and per-policy batches.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from qdil.data import Rollout
+from qdil.rl.collect import PolicyData
+from qdil.rl.gae import compute_gae
+from qdil.rl.networks import VectorizedActor, VectorizedCritic
+from qdil.rl.normalize import RunningMeanStd
+
+
+@dataclass(frozen=True)
+class PPOSettings:
+    """The hyperparameters one PPO iteration reads (see :class:`~qdil.rl.vppo.VPPO`)."""
+
+    gamma: float
+    gae_lambda: float
+    num_minibatches: int
+    update_epochs: int
+    clip_coef: float
+    value_clip: float | None
+    vf_coef: float
+    ent_coef: float
+    max_grad_norm: float
+    target_kl: float | None
+    normalize_returns: bool
+    bootstrap_truncation: bool
+
+
+def to_policies(x: torch.Tensor, num_policies: int) -> torch.Tensor:
+    """(T, N, ...) -> (P, N/P · T, ...): policy i's environments, env-major."""
+    steps, n = x.shape[:2]
+    x = x.transpose(0, 1).reshape(num_policies, n // num_policies, steps, *x.shape[2:])
+    return x.flatten(1, 2)
+
+
+def from_policies(x: torch.Tensor, steps: int) -> torch.Tensor:
+    """Inverse of :func:`to_policies`: (P, N/P · T, ...) -> (T, N, ...)."""
+    num_policies = x.shape[0]
+    x = x.reshape(num_policies, -1, steps, *x.shape[2:]).flatten(0, 1)
+    return x.transpose(0, 1)
+
+
+def ppo_update(
+    settings: PPOSettings,
+    generator: torch.Generator,
+    actor: VectorizedActor,
+    actor_opt: torch.optim.Optimizer,
+    critic: VectorizedCritic,
+    critic_opt: torch.optim.Optimizer,
+    return_stats: RunningMeanStd,
+    rollout: Rollout,
+    pdata: PolicyData,
+    rewards: torch.Tensor,
+) -> dict[str, float]:
+    """One PPO iteration of P policies side by side: GAE on the rollout, then minibatch epochs.
+
+    Args:
+        settings: the hyperparameters.
+        generator: the noise generator that shuffles the minibatches.
+        actor: the P actors.
+        actor_opt: their optimiser.
+        critic: the P critics.
+        critic_opt: their optimiser.
+        return_stats: running statistics of the value targets (updated here).
+        rollout: (T, N) transitions, N/P environments per policy.
+        pdata: the policies' normalised observations, actions and log-probabilities.
+        rewards: (T, N) rewards to maximise.
+
+    Returns:
+        Mean diagnostics: losses, entropy, approximate KL, clip fraction, explained
+        variance, epochs run.
+    """
+    num_policies, steps = actor.num_models, rollout.num_steps
+    obs = to_policies(pdata.norm_obs, num_policies)
+    next_obs = to_policies(pdata.norm_next_obs, num_policies)
+    # ---- values and GAE (in reward units; the critic works in normalised units)
+    with torch.no_grad():
+        values, next_values = critic(obs), critic(next_obs)
+        if settings.normalize_returns:
+            values = return_stats.denormalize(values)
+            next_values = return_stats.denormalize(next_values)
+        terminated = rollout.terminated if settings.bootstrap_truncation else rollout.dones
+        advantages, returns = compute_gae(
+            rewards,
+            from_policies(values, steps),
+            from_policies(next_values, steps),
+            rollout.dones,
+            terminated,
+            settings.gamma,
+            settings.gae_lambda,
+        )
+        returns = to_policies(returns, num_policies)
+        if settings.normalize_returns:
+            return_stats.update(returns)
+            returns = return_stats.normalize(returns)
+            values = return_stats.normalize(values)
+    advantages = to_policies(advantages, num_policies)
+    actions = to_policies(pdata.actions, num_policies)
+    old_log_probs = to_policies(pdata.log_probs, num_policies)
+
+    # ---- minibatch epochs
+    batch = obs.shape[1]
+    minibatch = max(1, batch // settings.num_minibatches)
+    stats: dict[str, list[float]] = {
+        k: [] for k in ("policy_loss", "value_loss", "entropy", "approx_kl", "clipfrac")
+    }
+    epochs = 0
+    for _ in range(settings.update_epochs):
+        epochs += 1
+        order = torch.randperm(batch, generator=generator)
+        for start in range(0, batch - minibatch + 1, minibatch):
+            idx = order[start : start + minibatch]
+            dist = actor.distribution(obs[:, idx])
+            new_log_probs = dist.log_prob(actions[:, idx]).sum(-1)
+            log_ratio = new_log_probs - old_log_probs[:, idx]
+            ratio = log_ratio.exp()
+            with torch.no_grad():
+                approx_kl = ((ratio - 1) - log_ratio).mean(1)
+                clipfrac = ((ratio - 1).abs() > settings.clip_coef).float().mean(1)
+            adv = advantages[:, idx]
+            adv = (adv - adv.mean(1, keepdim=True)) / (adv.std(1, keepdim=True) + 1e-8)
+            pg_loss = torch.max(
+                -adv * ratio, -adv * ratio.clamp(1 - settings.clip_coef, 1 + settings.clip_coef)
+            ).mean(1)
+            new_values = critic(obs[:, idx])
+            v_loss = (new_values - returns[:, idx]).square()
+            if settings.value_clip is not None:
+                clipped = values[:, idx] + (new_values - values[:, idx]).clamp(
+                    -settings.value_clip, settings.value_clip
+                )
+                v_loss = torch.max(v_loss, (clipped - returns[:, idx]).square())
+            v_loss = 0.5 * v_loss.mean(1)
+            entropy = dist.entropy().sum(-1).mean(1)
+            # a sum over policies keeps their gradients independent
+            loss = (pg_loss - settings.ent_coef * entropy + settings.vf_coef * v_loss).sum()
+            actor_opt.zero_grad()
+            critic_opt.zero_grad()
+            loss.backward()
+            actor.clip_grad_norm_per_model(settings.max_grad_norm)
+            critic.clip_grad_norm_per_model(settings.max_grad_norm)
+            actor_opt.step()
+            critic_opt.step()
+            step_stats = {
+                "policy_loss": pg_loss,
+                "value_loss": v_loss,
+                "entropy": entropy,
+                "approx_kl": approx_kl,
+                "clipfrac": clipfrac,
+            }
+            for key, value in step_stats.items():
+                stats[key].append(float(value.detach().mean()))
+        if settings.target_kl is not None and float(approx_kl.mean()) > settings.target_kl:
+            break
+    with torch.no_grad():
+        explained = 1 - (returns - values).var() / (returns.var() + 1e-8)
+    out = {key: float(np.mean(values_)) for key, values_ in stats.items()}
+    out.update(explained_variance=float(explained), epochs=float(epochs))
+    return out
