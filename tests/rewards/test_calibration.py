@@ -52,6 +52,11 @@ def test_calibrated_reward_after_training_is_finite_bounded_and_anchored() -> No
     )
     last = metrics[-1]
     assert last["critic_expert"] > last["critic_policy"]
+    # the logged spreads are the critic's own on either side (all 400 transitions scored)
+    with torch.no_grad():
+        spreads = [float(model.score(batch).std()) for batch in (expert, policy)]
+    assert [last["critic_expert_std"], last["critic_policy_std"]] == pytest.approx(spreads)
+    assert all(spread > 0 for spread in spreads)
     # the means of the rewards sit near the anchors (the GAIL form of ±2) whatever the gap
     assert last["reward_expert"] == pytest.approx(2.13, abs=0.5)
     assert last["reward_policy"] == pytest.approx(0.13, abs=0.1)

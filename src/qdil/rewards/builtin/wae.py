@@ -176,7 +176,8 @@ class WAEReward(AdversarialReward):
             policy: the iteration's policy transitions (a random subset is scored).
 
         Returns:
-            μ_e, μ_π and the mean calibrated reward on either side, to log.
+            μ_e, μ_π, the critic's standard deviation on either side and the mean
+            calibrated reward on either side, to log.
         """
         if len(policy) > self.calibration_samples:
             policy = policy[torch.randperm(len(policy))[: self.calibration_samples]]
@@ -184,6 +185,11 @@ class WAEReward(AdversarialReward):
         means = [float(s.mean()) for s in scores]
         self.critic_means.copy_(torch.tensor(means, dtype=torch.float64))
         metrics = {"critic_expert": means[0], "critic_policy": means[1]}
+        # the spread within each side, against the gap: how much the reward can tell policy
+        # transitions apart once ``calibrated`` divides by the gap
+        metrics["critic_expert_std"], metrics["critic_policy_std"] = (
+            float(s.std()) if len(s) > 1 else 0.0 for s in scores
+        )
         if self.reward_type == "calibrated":  # from the same scores, not a second pass
             metrics["reward_expert"] = float(self.transform(scores[0]).mean())
             metrics["reward_policy"] = float(self.transform(scores[1]).mean())
