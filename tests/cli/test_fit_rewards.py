@@ -20,6 +20,7 @@ FAMILIES = {
     "pwil": [],
     "giril": ["--reward.pretrain_epochs", "2"],
     "wae_gail": [],
+    "wae_wgail": ["--reward.reward_type", "standardized"],
     "mcwae_wgail": ["--bonus.enabled", "true", "--reward.reward_type", "calibrated"],
 }
 try:  # the example plugin package, installed by the README's test command
@@ -71,6 +72,8 @@ def test_fit_runs_each_reward_family(
         assert all(math.isfinite(a) for a in anchors)  # the calibration's μ_e and μ_π
     else:
         assert last["reward/learned_per_step"] == last["reward/train_per_step"]
+    if reward == "wae_wgail":  # standardized: the policy's spread is measured and logged
+        assert float(last["reward/critic_policy_std"]) > 0
 
 
 def test_imitation_without_demos_is_refused(tmp_path: Path, monkeypatch) -> None:

@@ -9,7 +9,7 @@ import pytest
 import torch
 
 from qdil.rewards.bonus import ExplorationBonus
-from qdil.rewards.builtin.wae import MCWAEWGAIL, calibrated_logit
+from qdil.rewards.builtin.wae import MCWAEWGAIL, calibrated_logit, standardized_logit
 from qdil.rewards.contract import ACT, OBS, K, as_rollout, synthetic, train
 from qdil.rewards.nets import gail_reward
 
@@ -83,3 +83,37 @@ def test_bonus_reports_learned_reward_and_bonus_per_training_step() -> None:
     assert 0.25 <= metrics["bonus_per_step"] < 0.5  # weight 0.5 × [1/2, 1)
     again = model.update(expert, policy, iteration=2)  # sums restart every iteration
     assert again["learned_per_step"] == 0.0 and again["bonus_per_step"] == 0.0
+
+
+def test_standardized_logit_anchors_and_invariance() -> None:
+    scores = torch.tensor([-3.0, -1.0, 1.0, 7.0])
+    logits = standardized_logit(scores, policy_mean=-1.0, policy_std=2.0)
+    np.testing.assert_allclose(logits.numpy(), [-1.0, 0.0, 1.0, 4.0])
+    # a critic that drifted by an offset and a scale gives the same logits
+    moved = standardized_logit(5.0 + 3.0 * scores, policy_mean=2.0, policy_std=6.0)
+    torch.testing.assert_close(moved, logits)
+
+
+def test_standardized_reward_after_training_centres_the_policy() -> None:
+    expert, policy = synthetic(2.0, 400, seed=5), synthetic(-2.0, 400, seed=6)
+    model, metrics = train(
+        MCWAEWGAIL(OBS, ACT, K, reward_type="standardized", batch_size=100), expert, policy, 20
+    )
+    last = metrics[-1]
+    assert float(model.critic_policy_std) == pytest.approx(last["critic_policy_std"])
+    rewards = model.reward(policy)
+    assert torch.isfinite(rewards).all() and (rewards >= 0).all()
+    # the policy's mean critic value sits at ℓ = 0: the mean logit over its data is 0
+    with torch.no_grad():
+        logits = (model.score(policy) - last["critic_policy"]) / last["critic_policy_std"]
+    assert float(logits.mean()) == pytest.approx(0.0, abs=1e-4)
+    assert float(logits.std()) == pytest.approx(1.0, abs=1e-4)
+    # expert transitions, further up the critic, earn more than the policy's on average
+    assert last["reward_expert"] > last["reward_policy"] > 0.5
+    # σ_π travels with checkpoints; checkpoints without it load with σ_π = 1
+    clone = MCWAEWGAIL(OBS, ACT, K, reward_type="standardized")
+    clone.load_state_dict(model.state_dict())
+    torch.testing.assert_close(clone.reward(expert), model.reward(expert))
+    old = {k: v for k, v in model.state_dict().items() if k != "critic_policy_std"}
+    clone.load_state_dict(old)
+    assert float(clone.critic_policy_std) == 1.0

@@ -21,8 +21,11 @@ grows and its offset drifts), so ``calibrated`` first maps it onto one: after ev
 the critic's means on the expert (μ_e) and on the iteration's policy data (μ_π) fix the
 logit ℓ = 4·(D − (μ_e + μ_π)/2) / max(μ_e − μ_π, min_gap), which puts the expert's mean
 at ℓ = +2 (r ≈ 2.13) and the policy's at ℓ = −2 (r ≈ 0.13) whatever the critic's scale
-(see :func:`calibrated_logit`). Unspecified by the paper, chosen here and documented:
-encoder, decoder and adversary widths (100, 100), latent size 8, a Gaussian encoder.
+(see :func:`calibrated_logit`). ``standardized`` instead standardises the critic on the
+policy's data, ℓ = (D − μ_π)/σ_π, so that a well-separating critic does not flatten the
+differences between policy transitions (:func:`standardized_logit`). Unspecified by the
+paper, chosen here and documented: encoder, decoder and adversary widths (100, 100),
+latent size 8, a Gaussian encoder.
 """
 
 from __future__ import annotations
@@ -65,6 +68,25 @@ def calibrated_logit(
     return 2.0 * CALIBRATION_LOGIT * (score - 0.5 * (expert_mean + policy_mean)) / gap
 
 
+def standardized_logit(score: torch.Tensor, policy_mean: float, policy_std: float) -> torch.Tensor:
+    """Map critic values onto a logit standardised on the policy's own data.
+
+    ℓ = (D − μ_π) / σ_π: the policy's mean maps to 0 (r = log 2 under GAIL's transform) and
+    every σ_π of critic value above it adds one logit unit, however far the expert's mean
+    lies. Unlike :func:`calibrated_logit`, a critic that separates expert and policy well
+    (a large gap) does not flatten the differences between policy transitions.
+
+    Args:
+        score: (B,) critic values D(z̄).
+        policy_mean: μ_π, the critic's mean on policy inputs.
+        policy_std: σ_π, its standard deviation there (> 0).
+
+    Returns:
+        (B,) logits.
+    """
+    return (score - policy_mean) / policy_std
+
+
 class WAEReward(AdversarialReward):
     """Shared machinery of the WAE reward models (not registered itself).
 
@@ -76,9 +98,10 @@ class WAEReward(AdversarialReward):
         hidden: widths of encoder, decoder and latent adversary (the paper: (100, 100)).
         regularization: λ (the paper: 1).
         reward_type: ``gail`` (−log(1 − σ(D(z̄)) + 1e-8), default), ``calibrated`` (the
-            GAIL form of :func:`calibrated_logit`), ``critic`` (D(z̄)) or ``sigmoid``
-            (σ(D(z̄))).
-        min_gap: smallest expert–policy critic gap that ``calibrated`` divides by.
+            GAIL form of :func:`calibrated_logit`), ``standardized`` (the GAIL form of
+            :func:`standardized_logit`), ``critic`` (D(z̄)) or ``sigmoid`` (σ(D(z̄))).
+        min_gap: smallest expert–policy critic gap that ``calibrated`` divides by, and
+            (over 4) the smallest policy spread that ``standardized`` divides by.
         calibration_samples: policy transitions (at most) the calibration scores after
             each update; all expert transitions are scored.
         **kwargs: :class:`~qdil.rewards.adversarial.AdversarialReward` options.
@@ -93,7 +116,7 @@ class WAEReward(AdversarialReward):
         latent_dim: int = 8,
         hidden: Sequence[int] = (100, 100),
         regularization: float = 1.0,
-        reward_type: Literal["gail", "calibrated", "critic", "sigmoid"] = "gail",
+        reward_type: Literal["gail", "calibrated", "standardized", "critic", "sigmoid"] = "gail",
         min_gap: float = 1.0,
         calibration_samples: int = 8192,
         **kwargs: Any,
@@ -117,6 +140,9 @@ class WAEReward(AdversarialReward):
             "critic_means",
             torch.tensor([CALIBRATION_LOGIT, -CALIBRATION_LOGIT], dtype=torch.float64),
         )
+        # σ_π of the last update, for ``standardized`` (checkpointed; 1 before the first)
+        self.register_buffer("critic_policy_std", torch.ones((), dtype=torch.float64))
+        self._register_load_state_dict_pre_hook(_default_policy_std)
         self.encoder = mlp(self.input_dim, hidden, 2 * latent_dim)
         self.decoder = mlp(latent_dim, hidden, self.input_dim)
         self.adversary = mlp(latent_dim, hidden, 1)
@@ -165,6 +191,9 @@ class WAEReward(AdversarialReward):
         if self.reward_type == "calibrated":
             expert_mean, policy_mean = self.critic_means.tolist()
             score = calibrated_logit(score, expert_mean, policy_mean, self.min_gap)
+        elif self.reward_type == "standardized":
+            policy_std = max(float(self.critic_policy_std), self.min_gap / 4)
+            score = standardized_logit(score, float(self.critic_means[1]), policy_std)
         return gail_reward(score)
 
     @torch.no_grad()
@@ -184,13 +213,15 @@ class WAEReward(AdversarialReward):
         scores = self.score(expert), self.score(policy)
         means = [float(s.mean()) for s in scores]
         self.critic_means.copy_(torch.tensor(means, dtype=torch.float64))
+        if len(scores[1]) > 1:
+            self.critic_policy_std.fill_(float(scores[1].std()))
         metrics = {"critic_expert": means[0], "critic_policy": means[1]}
         # the spread within each side, against the gap: how much the reward can tell policy
         # transitions apart once ``calibrated`` divides by the gap
         metrics["critic_expert_std"], metrics["critic_policy_std"] = (
             float(s.std()) if len(s) > 1 else 0.0 for s in scores
         )
-        if self.reward_type == "calibrated":  # from the same scores, not a second pass
+        if self.reward_type in ("calibrated", "standardized"):  # the same scores, no 2nd pass
             metrics["reward_expert"] = float(self.transform(scores[0]).mean())
             metrics["reward_policy"] = float(self.transform(scores[1]).mean())
         return metrics
@@ -349,3 +380,8 @@ class MCWAEGAIL(WAEGAIL):
         **kwargs: Any,
     ) -> None:
         super().__init__(obs_dim, action_dim, num_measures, use_measures=use_measures, **kwargs)
+
+
+def _default_policy_std(state_dict: dict[str, Any], prefix: str, *_: Any) -> None:
+    """Load checkpoints written before ``critic_policy_std`` existed (σ_π = 1 then)."""
+    state_dict.setdefault(prefix + "critic_policy_std", torch.ones((), dtype=torch.float64))
