@@ -88,10 +88,10 @@ METHODS = {
     "mcwae_wgail": ("mcwae_wgail", False, "mCWAE-WGAIL (ablation)"),
 }
 
-# laptop imitation: the Wasserstein critics go through the calibrated transform and the
+# laptop imitation: the Wasserstein critics go through the standardized transform and the
 # bonus is scaled so that it breaks ties instead of deciding (docs/rewards/balance.md);
 # the paper recipes keep the paper's unscaled sum and decision D6's transform
-CALIBRATED_REWARDS = {"wae_wgail", "mcwae_wgail"}
+STANDARDIZED_REWARDS = {"wae_wgail", "mcwae_wgail"}
 LAPTOP_BONUS_WEIGHT = 0.25
 
 # rewards whose returns can be negative get a lower CMA-MAE threshold
@@ -152,8 +152,8 @@ def reward_section(task: str, reward: str, paper: bool) -> dict | str:
         args["batch_size"] = IL_BATCH[task]
     if reward == "giril":
         args["pretrain_epochs"] = 10000 if paper else 100
-    if reward in CALIBRATED_REWARDS and not paper:
-        args["reward_type"] = "calibrated"
+    if reward in STANDARDIZED_REWARDS and not paper:
+        args["reward_type"] = "standardized"
     return {"class_path": reward, "init_args": args} if args else reward
 
 
@@ -219,8 +219,12 @@ def recipe(task: str, method: str | None, paper: bool) -> tuple[str, dict]:
             **sections,
         }
         balance = []
-        if not paper and (bonus or reward in CALIBRATED_REWARDS):
-            parts = ["the critic calibrated"] if reward in CALIBRATED_REWARDS else []
+        if not paper and (bonus or reward in STANDARDIZED_REWARDS):
+            parts = (
+                ["the critic standardised on the policy's data"]
+                if reward in STANDARDIZED_REWARDS
+                else []
+            )
             parts += [f"the bonus weighted {LAPTOP_BONUS_WEIGHT}"] if bonus else []
             balance = [
                 f"Reward balance ({' and '.join(parts)}; the paper: unscaled):",
