@@ -40,6 +40,10 @@ class EnvConfig:
         eval_envs: simulations of the evaluations; ``null`` for λ·branch_episodes (or
             mean_episodes if larger).
         num_threads: physics threads; ``null`` for every available core.
+        backend: physics engine: ``mujoco`` (MuJoCo's C engine on the CPU, bit-identical to
+            gymnasium) or ``warp`` (MuJoCo Warp, float32; ``pip install -e ".[warp]"``).
+        device: where the ``warp`` backend steps: ``cpu`` (Warp's CPU device, for tests) or
+            ``cuda`` / ``cuda:N``. Policies, PPO and reward models stay on the CPU.
         max_episode_steps: episode horizon (the paper: 1000).
         task_kwargs: gymnasium keyword arguments of the task (e.g. ``ctrl_cost_weight``).
     """
@@ -48,6 +52,8 @@ class EnvConfig:
     num_envs: int = 3000
     eval_envs: int | None = None
     num_threads: int | None = None
+    backend: Literal["mujoco", "warp"] = "mujoco"
+    device: str = "cpu"
     max_episode_steps: int = 1000
     task_kwargs: dict[str, Any] = field(default_factory=dict)
 

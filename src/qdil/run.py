@@ -61,6 +61,8 @@ def build_run(
         max_episode_steps=env.max_episode_steps,
         autoreset_mode="SameStep",
         num_threads=env.num_threads,
+        backend=env.backend,
+        device=env.device,
         **env.task_kwargs,
     )
     obs_dim = train_env.single_observation_space.shape[0]
@@ -123,6 +125,8 @@ def build_run(
         max_episode_steps=env.max_episode_steps,
         autoreset_mode="Disabled",
         num_threads=env.num_threads,
+        backend=env.backend,
+        device=env.device,
         **env.task_kwargs,
     )
     rl.setup(train_env, eval_env, vppo_seed)

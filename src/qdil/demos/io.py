@@ -70,16 +70,16 @@ class TaskShape:
     def of(cls, task: str) -> TaskShape:
         """The sizes of a gymnasium task id such as ``"Walker2d-v5"``."""
         from qdil.envs import make_gymnasium_env
-        from qdil.envs.tasks import TASKS, make_task
+        from qdil.envs.tasks import make_task
 
-        make_task(task)  # validates the name
-        env = make_gymnasium_env(TASKS[task].gym_id, quiet=True)
+        spec = type(make_task(task))  # validates the name
+        env = make_gymnasium_env(spec.reference_id or spec.gym_id, quiet=True)
         return cls(
             task=task,
             obs_dim=int(env.observation_space.shape[0]),
             action_dim=int(env.action_space.shape[0]),
-            num_measures=len(TASKS[task].feet),
-            feet=TASKS[task].feet,
+            num_measures=len(spec.feet),
+            feet=spec.feet,
         )
 
 

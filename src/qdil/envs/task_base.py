@@ -36,12 +36,18 @@ class LocomotionTask(abc.ABC):
         floor: the floor geom name.
         needs_rne: whether gymnasium's observation or reward reads ``cfrc_ext``, which needs
             ``mj_rnePostConstraint`` after each step.
+        solver: a constraint solver that replaces the model file's (``"newton"``, ``"cg"``,
+            ``"pgs"``), or ``None`` to keep it.
+        reference_id: for a variant that differs from gymnasium on purpose, the gymnasium
+            task it derives from (same spaces); ``None`` for the tasks equal to gymnasium's.
     """
 
     gym_id: ClassVar[str]
     feet: ClassVar[tuple[str, ...]]
     floor: ClassVar[str] = "floor"
     needs_rne: ClassVar[bool] = False
+    solver: ClassVar[str | None] = None  # None: the model file's constraint solver
+    reference_id: ClassVar[str | None] = None  # a variant's gymnasium namesake
     default_xml: ClassVar[str]
     default_frame_skip: ClassVar[int]
 

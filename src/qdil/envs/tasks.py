@@ -24,11 +24,13 @@ from qdil.envs.task_base import Arrays, LocomotionTask
 
 __all__ = [
     "TASKS",
+    "VARIANTS",
     "Ant",
     "Arrays",
     "HalfCheetah",
     "Hopper",
     "Humanoid",
+    "HumanoidNewton",
     "LocomotionTask",
     "Walker2d",
     "make_task",
@@ -37,6 +39,25 @@ __all__ = [
 TASKS: dict[str, type[LocomotionTask]] = {
     cls.gym_id: cls for cls in (Walker2d, HalfCheetah, Humanoid, Hopper, Ant)
 }
+"""The tasks equal to gymnasium's v5 tasks, by gymnasium id."""
+
+
+class HumanoidNewton(Humanoid):
+    """Humanoid-v5 with MuJoCo's Newton solver instead of PGS, for MuJoCo Warp.
+
+    MuJoCo Warp has no PGS solver, which ``humanoid.xml`` asks for. Everything else
+    (observation, reward, termination, reset noise) is Humanoid-v5's; the contact and joint
+    limit forces are solved by Newton's method, so trajectories differ from gymnasium's once
+    the feet touch the floor (docs/guides/gpu.md gives the measured difference).
+    """
+
+    gym_id = "Humanoid-v5-newton"
+    reference_id = "Humanoid-v5"
+    solver = "newton"
+
+
+VARIANTS: dict[str, type[LocomotionTask]] = {HumanoidNewton.gym_id: HumanoidNewton}
+"""Tasks that differ from their gymnasium namesake on purpose (each documents how)."""
 
 
 def make_task(name: str, **kwargs: Any) -> LocomotionTask:
@@ -45,9 +66,10 @@ def make_task(name: str, **kwargs: Any) -> LocomotionTask:
     Raises:
         ValueError: for an unknown task or keyword, naming the known ones.
     """
-    cls = TASKS.get(name.removeprefix("qdil/"))
+    known = TASKS | VARIANTS
+    cls = known.get(name.removeprefix("qdil/"))
     if cls is None:
-        raise ValueError(f"unknown task {name!r}; known tasks: {', '.join(TASKS)}")
+        raise ValueError(f"unknown task {name!r}; known tasks: {', '.join(known)}")
     try:
         return cls(**kwargs)
     except TypeError as error:

@@ -28,7 +28,8 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from qdil.envs.physics import MujocoBatch, add_contact_sensors
+from qdil.envs.backends import make_physics
+from qdil.envs.physics import add_contact_sensors
 from qdil.envs.tasks import LocomotionTask, make_task
 
 
@@ -46,6 +47,10 @@ class LocomotionVectorEnv(VectorEnv):
             ``info["final_obs"]`` (a dense (N, obs_dim) array masked by ``_final_obs``) and
             ``info["final_info"]``. ``DISABLED``: call ``reset(options={"reset_mask": m})``.
         num_threads: physics threads; ``None`` uses every available core.
+        backend: physics engine, ``"mujoco"`` (MuJoCo's C engine, :class:`MujocoBatch`) or
+            ``"warp"`` (MuJoCo Warp, :class:`~qdil.envs.warp_physics.WarpBatch`).
+        device: Warp device of the ``warp`` backend, ``"cpu"`` or ``"cuda[:N]"``; the
+            ``mujoco`` backend runs on the CPU only.
         **task_kwargs: gymnasium's keyword arguments of the task, e.g. ``ctrl_cost_weight``.
 
     Raises:
@@ -59,6 +64,8 @@ class LocomotionVectorEnv(VectorEnv):
         max_episode_steps: int | None = 1000,
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         num_threads: int | None = None,
+        backend: str = "mujoco",
+        device: str = "cpu",
         **task_kwargs: Any,
     ) -> None:
         if isinstance(task, str):
@@ -80,17 +87,22 @@ class LocomotionVectorEnv(VectorEnv):
 
         spec = mujoco.MjSpec.from_file(str(task.xml_path))
         add_contact_sensors(spec, task.feet, task.floor)
+        if task.solver is not None:
+            spec.option.solver = getattr(mujoco.mjtSolver, f"mjSOL_{task.solver.upper()}")
         with warnings.catch_warnings():  # half_cheetah.xml's deprecated settotalmass
             warnings.simplefilter("ignore")
             self.model = spec.compile()
         reference = mujoco.MjData(self.model)
         task.bind(self.model, reference.qpos.ravel().copy(), reference.qvel.ravel().copy())
-        self.physics = MujocoBatch(
+        self.backend, self.device = backend, device
+        self.physics = make_physics(
+            backend,
             self.model,
             self.num_envs,
             task.exports(self.model),
             rne_post_constraint=task.needs_rne,
             num_threads=num_threads,
+            device=device,
         )
         self._names = list(task.exports(self.model))
 

@@ -1,0 +1,57 @@
+"""The physics engines a locomotion task can run on, chosen by ``env.backend``.
+
+``mujoco`` is MuJoCo's C engine stepped by numba kernels on the CPU
+(:class:`~qdil.envs.physics.MujocoBatch`, the default, bit-identical to gymnasium);
+``warp`` is MuJoCo Warp on a GPU or on Warp's CPU device
+(:class:`~qdil.envs.warp_physics.WarpBatch`, float32, agrees within a tolerance). Both
+offer the same ``exported`` / ``sensordata`` arrays, ``view``, ``step`` and ``reset``.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import mujoco
+
+from qdil.envs.physics import Export, MujocoBatch
+
+BACKENDS = ("mujoco", "warp")
+"""Values of ``env.backend``."""
+
+
+def make_physics(
+    backend: str,
+    model: mujoco.MjModel,
+    num_sims: int,
+    exports: dict[str, Export],
+    *,
+    rne_post_constraint: bool,
+    num_threads: int | None,
+    device: str,
+) -> Any:
+    """The batch of ``num_sims`` simulations of ``model`` on ``backend``.
+
+    Raises:
+        ValueError: naming ``env.backend`` or ``env.device`` when either is unknown, or the
+            ``mujoco`` backend is asked to run on a GPU.
+    """
+    if backend == "mujoco":
+        if device != "cpu":
+            raise ValueError(
+                f"env.device: {device!r} needs env.backend: warp; the mujoco backend runs on "
+                "the CPU (env.device: cpu)"
+            )
+        return MujocoBatch(
+            model,
+            num_sims,
+            exports,
+            rne_post_constraint=rne_post_constraint,
+            num_threads=num_threads,
+        )
+    if backend == "warp":
+        from qdil.envs.warp_physics import WarpBatch  # optional dependency
+
+        return WarpBatch(
+            model, num_sims, exports, rne_post_constraint=rne_post_constraint, device=device
+        )
+    raise ValueError(f"env.backend must be one of {list(BACKENDS)}, got {backend!r}")
