@@ -262,11 +262,39 @@ def files() -> dict[Path, str]:
     return out
 
 
+# GPU scale: the paper's recipes on MuJoCo Warp (docs/guides/gpu.md); Humanoid as the
+# Newton-solver variant, since MuJoCo Warp has no PGS solver
+GPU_METHODS = (None, "mcwae", "gail")
+GPU_TASKS = {"Humanoid-v5": "Humanoid-v5-newton"}
+
+
+def gpu_files() -> dict[Path, str]:
+    """recipes/gpu/: the paper's PPGA, WQDIL and GAIL recipes with ``env.backend: warp``."""
+    out = {}
+    for task in TASKS:
+        for method in GPU_METHODS:
+            text, body = recipe(task, method, paper=True)
+            env = body["env"]
+            env["task"] = GPU_TASKS.get(env["task"], env["task"])
+            body["env"] = {**env, "backend": "warp", "device": "cuda"}
+            note = [
+                "GPU scale: the paper's hyperparameters on MuJoCo Warp (env.backend: warp,",
+                'env.device: cuda; pip install -e ".[warp]", docs/guides/gpu.md).',
+            ]
+            if env["task"] in GPU_TASKS.values():
+                note.append(f"{env['task']}: Humanoid-v5 with the Newton solver (no PGS in Warp).")
+            stem = f"{task}_ppga" if method is None else f"{task}_{method}"
+            out[HERE / "gpu" / f"{stem}.yaml"] = (
+                text + header(note) + yaml.safe_dump(body, sort_keys=False)
+            )
+    return out
+
+
 def main() -> None:
     """Write the recipes (``--check``: only report files that differ)."""
     check = "--check" in sys.argv
     stale = []
-    for path, text in files().items():
+    for path, text in (files() | gpu_files()).items():
         if check:
             if not path.exists() or path.read_text() != text:
                 stale.append(path)

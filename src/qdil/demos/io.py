@@ -272,9 +272,12 @@ def _validate(path: Path, header: dict, arrays: dict[str, np.ndarray], task: str
     def fail(message: str) -> None:
         raise DemoFormatError(f"demonstrations {path}: {message}")
 
-    from qdil.envs.tasks import TASKS
+    from qdil.envs.tasks import TASKS, VARIANTS
 
-    if task is not None and header.get("task") != task:
+    # a task variant (Humanoid-v5-newton) imitates demonstrations of its gymnasium namesake
+    variant = VARIANTS.get(str(task).removeprefix("qdil/"))
+    namesake = variant.reference_id if variant is not None else None
+    if task is not None and header.get("task") not in (task, namesake):
         fail(
             f"recorded on {header.get('task')!r}, but the run's task is {task!r}; "
             f"use demonstrations of {task} (qdil demos RUN_DIR of a {task} expert)"

@@ -48,7 +48,7 @@ class HumanoidNewton(Humanoid):
     MuJoCo Warp has no PGS solver, which ``humanoid.xml`` asks for. Everything else
     (observation, reward, termination, reset noise) is Humanoid-v5's; the contact and joint
     limit forces are solved by Newton's method, so trajectories differ from gymnasium's once
-    the feet touch the floor (docs/guides/gpu.md gives the measured difference).
+    the feet touch the floor (docs/guides/gpu.md).
     """
 
     gym_id = "Humanoid-v5-newton"
