@@ -143,3 +143,11 @@ def test_a_resume_may_change_iterations_threads_and_logging_only() -> None:
     current["env"]["task"] = "H"
     current["seed"] = 1
     assert config_differences(stored, current) == ["env.task: 'W' -> 'H'", "seed: (absent) -> 1"]
+
+
+def test_keys_added_later_resume_when_a_checkpoint_lacks_them_at_their_implicit_value() -> None:
+    stored = {"env": {"task": "W"}}
+    assert config_differences(stored, {"env": {"task": "W", "backend": "mujoco"}}) == []
+    assert config_differences(stored, {"env": {"task": "W", "backend": "warp"}}) == [
+        "env.backend: 'mujoco' -> 'warp'"
+    ]

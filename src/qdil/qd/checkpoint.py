@@ -39,6 +39,9 @@ CHECKPOINT = Path("checkpoints") / "last.pt"
 # Recipe keys a resume may change: they set how long the run goes on and what it writes,
 # not what it computes (physics threads change speed only).
 RESUMABLE_KEYS = ("qd.iterations", "env.num_threads", "logging")
+# Recipe keys added after checkpoints stored their recipe, with the value that runs made
+# before them used implicitly: a checkpoint without the key resumes when it has that value.
+IMPLICIT_KEYS = {"env.backend": "mujoco", "env.device": "cpu"}
 
 
 class CheckpointError(RuntimeError):
@@ -69,6 +72,7 @@ def config_differences(
         ``"key: stored -> current"`` for every differing key, sorted by key.
     """
     old, new = _flatten(stored), _flatten(current)
+    old = {key: value for key, value in IMPLICIT_KEYS.items() if key in new} | old
 
     def compared(key: str) -> bool:
         return not any(key == name or key.startswith(f"{name}.") for name in allowed)
