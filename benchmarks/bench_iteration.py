@@ -95,6 +95,9 @@ def main() -> None:
     parser.add_argument("recipe", nargs="?", default=str(ROOT / "recipes" / "walker_ppga.yaml"))
     parser.add_argument("--iterations", type=int, default=3)
     args = parser.parse_args()
+    # the run happens in a temporary directory: resolve the recipe against the caller's
+    # working directory first (a relative path used to fail with "recipe ... not found")
+    args.recipe = str(Path(args.recipe).resolve())
     instrument()
     import qdil
     from qdil.cli import main as qdil_main
