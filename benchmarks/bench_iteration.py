@@ -55,7 +55,11 @@ def instrument() -> None:
 
     timed(physics.MujocoBatch, "step", "physics")
     timed(physics.MujocoBatch, "reset", "physics")
-    timed(collect, "act", "policy inference")
+    # the per-step sampler (older code: the ``act`` function, for before/after comparisons)
+    if hasattr(collect, "PolicySampler"):
+        timed(collect.PolicySampler, "sample", "policy inference")
+    else:
+        timed(collect, "act", "policy inference")
     timed(vppo.VPPO, "_ppo_update", "PPO updates")
     for name in ("ask_dqd", "tell_dqd", "ask", "tell"):
         timed(Scheduler, name, "archive work")
