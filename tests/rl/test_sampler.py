@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 import torch
 
-from qdil.rl.collect import PolicySampler
 from qdil.rl.networks import VectorizedActor
 from qdil.rl.normalize import RunningMeanStd
+from qdil.rl.sampler import PolicySampler
 
 
 def reference(actor, stats, obs, clip, generator, deterministic):
