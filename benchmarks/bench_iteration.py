@@ -108,8 +108,12 @@ def warm_up() -> None:
     env.step(np.zeros((2, 3)), mask=np.array([True, False]))
 
 
-def bare_rate(task: str, num_envs: int, steps: int) -> float:
-    """Env-steps/s of random actions on the task's batched env."""
+def bare_rate(task: str, num_envs: int, steps: int, repeats: int = 3) -> float:
+    """Env-steps/s of random actions on the task's batched env (median of ``repeats``).
+
+    A median of several passes, because one pass of a few hundred steps moved by about
+    10 % between runs on a loaded machine, as much as the changes it is compared with.
+    """
     import gymnasium as gym
 
     env = gym.make_vec(f"qdil/{task}", num_envs=num_envs, autoreset_mode="SameStep")
@@ -118,10 +122,13 @@ def bare_rate(task: str, num_envs: int, steps: int) -> float:
     low, high = env.single_action_space.low, env.single_action_space.high
     actions = rng.uniform(low, high, size=(steps, num_envs, low.size))
     env.step(actions[0])
-    start = CLOCK()
-    for a in actions:
-        env.step(a)
-    return steps * num_envs / (CLOCK() - start)
+    rates = []
+    for _ in range(repeats):
+        start = CLOCK()
+        for a in actions:
+            env.step(a)
+        rates.append(steps * num_envs / (CLOCK() - start))
+    return float(np.median(rates))
 
 
 def main() -> None:
