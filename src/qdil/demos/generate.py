@@ -26,9 +26,10 @@ import qdil
 from qdil.demos.dataset import DemoSet
 from qdil.envs.vector import LocomotionVectorEnv
 from qdil.qd.checkpoint import load_archive
-from qdil.rl.collect import ActionMap, act
+from qdil.rl.collect import ActionMap
 from qdil.rl.networks import VectorizedActor
 from qdil.rl.normalize import RunningMeanStd
+from qdil.rl.sampler import act
 
 
 def farthest_point_sampling(points: np.ndarray, num: int, start: int = 0) -> np.ndarray:

@@ -21,6 +21,7 @@ from qdil.data import Rollout
 from qdil.envs.vector import LocomotionVectorEnv
 from qdil.rl.networks import VectorizedActor
 from qdil.rl.normalize import RunningMeanStd
+from qdil.rl.sampler import PolicySampler
 
 RewardFn = Callable[[Rollout], torch.Tensor]
 """Maps a rollout to (T, N) per-step rewards."""
@@ -58,40 +59,6 @@ class PolicyData:
 def _blocks(x: torch.Tensor, num_policies: int) -> torch.Tensor:
     """(N, ...) -> (P, N/P, ...)."""
     return x.reshape(num_policies, x.shape[0] // num_policies, *x.shape[1:])
-
-
-def act(
-    actor: VectorizedActor,
-    stats: RunningMeanStd,
-    obs: torch.Tensor,
-    obs_clip: float,
-    generator: torch.Generator | None,
-    deterministic: bool = False,
-) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """Sample actions of P policies for N observations.
-
-    Args:
-        actor: P policies.
-        stats: their observation statistics.
-        obs: (N, obs_dim) raw observations, N divisible by P.
-        obs_clip: bound of normalised observations.
-        generator: random source of the Gaussian noise.
-        deterministic: take the mean action.
-
-    Returns:
-        ``(norm_obs, actions, log_probs)``: (N, obs_dim), (N, A) unclipped, (N,).
-    """
-    num_policies = actor.num_models
-    norm = stats.normalize(_blocks(obs, num_policies), clip=obs_clip)
-    with torch.no_grad():
-        mean = actor(norm)
-        std = actor.log_std.exp().unsqueeze(1).expand_as(mean)
-        if deterministic:
-            actions = mean
-        else:
-            actions = mean + std * torch.randn(mean.shape, generator=generator)
-        log_probs = torch.distributions.Normal(mean, std).log_prob(actions).sum(-1)
-    return norm.reshape(obs.shape), actions.reshape(obs.shape[0], -1), log_probs.reshape(-1)
 
 
 class Collector:
@@ -161,40 +128,45 @@ class Collector:
             "log_probs": torch.zeros(shape),
             "starts": torch.zeros(shape),
         }
+        # numpy views of the buffers: the loop writes the env's arrays into them directly
+        # (the same float64 -> float32 rounding as a tensor copy), without tensor wrappers
+        arr = {key: value.numpy() for key, value in buf.items()}
         norm_obs = torch.zeros((*shape, obs_dim))
         policy_actions = torch.zeros((*shape, action_dim))
+        sampler = PolicySampler(actor, stats, self.obs_clip)
+        buf["obs"][0] = self._obs
+        buf["contacts"][0] = self._contacts
+        buf["starts"][0] = self._starts
         for t in range(num_steps):
-            norm, actions, log_probs = act(actor, stats, self._obs, self.obs_clip, generator)
+            # the policies read s_t from the buffer it is stored in
+            norm, actions, log_probs = sampler.sample(buf["obs"][t], generator)
             executed = self.action_map(actions)
             next_obs, reward, terminated, truncated, info = env.step(executed.numpy())
             done = terminated | truncated
-            contacts = torch.from_numpy(info["foot_contact"])
-            final_obs, final_contacts = next_obs, contacts
-            if done.any():
-                final_obs = np.where(done[:, None], info["final_obs"], next_obs)
-                final_contacts = torch.where(
-                    torch.from_numpy(done)[:, None],
-                    torch.from_numpy(info["final_info"]["foot_contact"]),
-                    contacts,
-                )
+            contacts = info["foot_contact"]
+            arr["next_obs"][t] = next_obs
+            arr["next_contacts"][t] = contacts
+            if done.any():  # s_{t+1} is the final state, not the reset one
+                arr["next_obs"][t, done] = info["final_obs"][done]
+                arr["next_contacts"][t, done] = info["final_info"]["foot_contact"][done]
                 ended = info["episode"]["_r"]
                 self.episode_returns += info["episode"]["r"][ended].tolist()
                 self.episode_lengths += info["episode"]["l"][ended].tolist()
-            buf["obs"][t] = self._obs
-            buf["next_obs"][t] = torch.from_numpy(final_obs)
             buf["actions"][t] = executed
-            buf["contacts"][t] = self._contacts
-            buf["next_contacts"][t] = final_contacts
-            buf["rewards"][t] = torch.from_numpy(reward)
-            buf["dones"][t] = torch.from_numpy(done)
-            buf["terminated"][t] = torch.from_numpy(terminated)
+            arr["rewards"][t] = reward
+            arr["dones"][t] = done
+            arr["terminated"][t] = terminated
             buf["log_probs"][t] = log_probs
-            buf["starts"][t] = self._starts
             norm_obs[t] = norm
             policy_actions[t] = actions
-            self._obs = torch.from_numpy(next_obs).float()
-            self._contacts = contacts
-            self._starts = torch.from_numpy(done.astype(np.float32))
+            if t + 1 < num_steps:
+                arr["obs"][t + 1] = next_obs
+                arr["contacts"][t + 1] = contacts
+                arr["starts"][t + 1] = done
+        # where the next call goes on
+        self._obs = torch.from_numpy(next_obs).float()
+        self._contacts = torch.from_numpy(contacts)
+        self._starts = torch.from_numpy(done.astype(np.float32))
         rollout = Rollout(**buf, valid=torch.ones(shape))
         num_policies = actor.num_models
         next_by_policy = _blocks(buf["next_obs"].transpose(0, 1), num_policies).flatten(1, 2)
@@ -273,8 +245,9 @@ def evaluate_policies(
     steps: list[dict[str, torch.Tensor]] = []
     env_steps = 0
     actions_full = np.zeros((env.num_envs, env.single_action_space.shape[0]))
+    sampler = PolicySampler(actor, stats, obs_clip)
     while running.any():
-        _, actions, log_probs = act(actor, stats, obs_t, obs_clip, generator, deterministic)
+        _, actions, log_probs = sampler.sample(obs_t, generator, deterministic, log_probs=record)
         executed = action_map(actions)
         actions_full[:used] = executed.numpy()
         active = running.copy()

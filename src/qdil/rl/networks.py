@@ -52,11 +52,28 @@ class _StackedMLP(nn.Module):
         """P."""
         return self.weights[0].shape[0]
 
-    def mlp(self, x: torch.Tensor) -> torch.Tensor:
-        """(P, B, sizes[0]) -> (P, B, sizes[-1])."""
-        last = len(self.weights) - 1
-        for i, (weight, bias) in enumerate(zip(self.weights, self.biases, strict=True)):
-            x = torch.baddbmm(bias.unsqueeze(1), x, weight.transpose(1, 2))
+    def operands(self) -> list[tuple[torch.Tensor, torch.Tensor]]:
+        """Per layer, the (P, 1, out) bias and (P, in, out) weightᵀ views :meth:`mlp` uses."""
+        return [
+            (bias.unsqueeze(1), weight.transpose(1, 2))
+            for weight, bias in zip(self.weights, self.biases, strict=True)
+        ]
+
+    def mlp(
+        self, x: torch.Tensor, operands: list[tuple[torch.Tensor, torch.Tensor]] | None = None
+    ) -> torch.Tensor:
+        """(P, B, sizes[0]) -> (P, B, sizes[-1]).
+
+        Args:
+            x: (P, B, sizes[0]) inputs.
+            operands: :meth:`operands`, taken once by callers that run many small batches
+                with fixed parameters (iterating the parameter lists costs more than a small
+                layer's product); ``None`` takes them now.
+        """
+        layers = self.operands() if operands is None else operands
+        last = len(layers) - 1
+        for i, (bias, weight_t) in enumerate(layers):
+            x = torch.baddbmm(bias, x, weight_t)
             if i < last:
                 x = torch.tanh(x)
         return x

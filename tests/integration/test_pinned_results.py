@@ -1,0 +1,239 @@
+"""Pinned results: the speed work of issue 12 must leave every number bit-identical.
+
+Each test runs a real code path at a fixed seed (a training rollout of three policies, an
+evaluation, the two VPPO phases, two-iteration ``qdil fit`` runs on the true reward and with
+WQDIL's reward model and bonus) and hashes the exact bytes of what it produced: observations,
+actions, rewards, log-likelihoods, trained solutions, the three archives and the logged
+metrics. The digests were recorded from the code before the speed changes; a faster path
+that changes a single bit fails here.
+
+Floating-point results depend on the CPU's vector unit and on the versions of torch, numpy
+and MuJoCo, so digests are pinned per platform fingerprint. On a platform without pins the
+tests skip; ``QDIL_PRINT_PINS=1 pytest tests/integration/test_pinned_results.py -s`` prints
+the fingerprint and the digests to pin there (from code known to be right).
+"""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import os
+import pickle
+import platform
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import pytest
+import torch
+
+from qdil.cli import main
+from qdil.envs.vector import LocomotionVectorEnv
+from qdil.rl.collect import Collector, evaluate_policies
+from qdil.rl.networks import VectorizedActor
+from qdil.rl.normalize import RunningMeanStd
+from qdil.rl.vppo import VPPO
+
+ROOT = Path(__file__).resolve().parents[2]
+SMOKE = ROOT / "recipes" / "smoke"
+
+
+def fingerprint() -> str:
+    """What decides the rounding of the results: CPU, vector unit and library versions."""
+    model = ""
+    try:
+        with open("/proc/cpuinfo") as file:
+            model = next(line.split(":", 1)[1].strip() for line in file if "model name" in line)
+    except (OSError, StopIteration):
+        model = platform.processor()
+    return (
+        f"{platform.machine()}/{model}/{torch.backends.cpu.get_cpu_capability()}/"
+        f"torch {torch.__version__}/numpy {np.__version__}/mujoco {mujoco.__version__}"
+    )
+
+
+PINS: dict[str, dict[str, str]] = {
+    # recorded at 3af8089, before the speed changes of issue 12
+    "x86_64/AMD EPYC/AVX512/torch 2.13.0+cpu/numpy 2.4.6/mujoco 4.0.0": {
+        "training_rollouts": "1c89792ee19db6916e98b25efd317371c020b3aa72d35d5b0f561cb1e188c113",
+        "evaluation_False": "2549ad653eaa7595e4a038d15a07c26dd6affedc75a5a93c66c6583952ca3a7b",
+        "evaluation_True": "27126b088c46c47dc2e68d99daf53ad90e3ef78d904a2e53417b5dafeca4d813",
+        "vppo_phases": "229e04a120c427b56d656a70f6ceb43ea399cd2c761fde512ebe45d67ad29c8f",
+        "fit_true": "a257b36864907be6093b674850f6dc42f7baae80f4d7523000e6ae6b43c86e0e",
+        "fit_wqdil": "7cd4ec7ac8061f59cce20e28f6bc8d4b0662e334dadf2d4dc6b02ae8fe572f0d",
+    },
+}
+
+
+def digest(*values: object) -> str:
+    """SHA-256 of the exact bytes, dtypes and shapes of arrays, tensors, dicts and lists."""
+    sha = hashlib.sha256()
+
+    def feed(value: object) -> None:
+        if isinstance(value, torch.Tensor):
+            value = value.detach().cpu().numpy()
+        if isinstance(value, dict):
+            for key in sorted(value):
+                sha.update(str(key).encode())
+                feed(value[key])
+        elif isinstance(value, list | tuple):
+            sha.update(f"[{len(value)}]".encode())
+            for item in value:
+                feed(item)
+        elif isinstance(value, np.ndarray | np.generic | float | int):
+            array = np.ascontiguousarray(value)
+            sha.update(f"{array.dtype}{array.shape}".encode())
+            sha.update(array.tobytes())
+        else:
+            sha.update(repr(value).encode())
+
+    for value in values:
+        feed(value)
+    return sha.hexdigest()
+
+
+def check(name: str, value: str) -> None:
+    """Compare a digest with its pin on this platform (or skip where none is pinned)."""
+    here = fingerprint()
+    if os.environ.get("QDIL_PRINT_PINS"):
+        print(f"\nPIN {here!r} {name!r}: {value!r},")
+    pinned = PINS.get(here, {})
+    if name not in pinned:
+        pytest.skip(f"no pinned digest of {name} for platform {here!r}")
+    assert value == pinned[name], f"{name} changed: results are no longer bit-identical"
+
+
+def policies(num: int, seed: int) -> np.ndarray:
+    """(num, D) Walker2d policies with large enough weights to act differently."""
+    base = np.stack([VectorizedActor.initial_solution(17, 6, seed=s) for s in range(num)])
+    noise = np.random.default_rng(seed).normal(0.0, 0.05, base.shape).astype(np.float32)
+    return base + noise
+
+
+def fitted_stats(num: int) -> RunningMeanStd:
+    """Observation statistics of ``num`` policies that are not the identity."""
+    stats = RunningMeanStd(num, (17,))
+    rng = np.random.default_rng(7)
+    stats.update(torch.as_tensor(rng.normal(0.3, 2.0, (num, 50, 17))))
+    return stats
+
+
+def test_training_rollouts_are_pinned() -> None:
+    env = LocomotionVectorEnv("Walker2d-v5", 6, max_episode_steps=30, autoreset_mode="SameStep")
+    collector = Collector(env)
+    collector.start(seed=11)
+    actor = VectorizedActor(3, 17, 6)
+    actor.set_solutions(policies(3, seed=1))
+    stats = fitted_stats(3)
+    generator = torch.Generator().manual_seed(5)
+    parts = []
+    for update in (True, False):  # two calls: episodes run on across them
+        rollout, pdata = collector.collect(actor, stats, 40, generator, update_stats=update)
+        assert rollout.dones.any()
+        parts += [vars(rollout), vars(pdata)]
+    parts += [stats.state_dict(), list(collector.pop_episode_stats())]
+    check("training_rollouts", digest(*parts))
+
+
+@pytest.mark.parametrize("deterministic", [False, True])
+def test_evaluations_are_pinned(deterministic: bool) -> None:
+    env = LocomotionVectorEnv("Walker2d-v5", 5, max_episode_steps=40, autoreset_mode="Disabled")
+    actor = VectorizedActor(2, 17, 6)
+    actor.set_solutions(policies(2, seed=2))
+    generator = torch.Generator().manual_seed(3)
+    recorded = []
+
+    def reward_fn(rollout):
+        recorded.append(vars(rollout))
+        return 2.0 * rollout.rewards + rollout.next_contacts.sum(-1)
+
+    evaluation = evaluate_policies(
+        env, actor, fitted_stats(2), 2, 4, reward_fn, deterministic, generator=generator
+    )
+    plain = evaluate_policies(
+        env, actor, fitted_stats(2), 2, 4, None, deterministic, 10.0, generator
+    )
+    check(f"evaluation_{deterministic}", digest(vars(evaluation), recorded, vars(plain)))
+
+
+def test_vppo_phases_are_pinned() -> None:
+    algo = VPPO(
+        rollout_length=16,
+        jacobian_iterations=2,
+        walk_iterations=2,
+        num_minibatches=2,
+        update_epochs=3,
+        target_kl=0.02,
+        adaptive_std=True,
+    )
+    train = LocomotionVectorEnv("Walker2d-v5", 6, max_episode_steps=20, autoreset_mode="SameStep")
+    evaluation = LocomotionVectorEnv("Walker2d-v5", 4, autoreset_mode="Disabled")
+    algo.setup(train, evaluation, seed=0)
+    theta = policies(1, seed=4)[0]
+
+    def reward_fn(rollout):
+        return rollout.rewards - 0.1 * rollout.actions.square().sum(-1)
+
+    jacobian = algo.compute_jacobian(theta, fitted_stats(1), reward_fn, seed=1)
+    walk = algo.walk(theta, fitted_stats(1), np.array([1.0, 0.5, -0.5]), reward_fn, seed=2)
+    results = [
+        [phase.solutions, phase.stats.state_dict(), phase.diagnostics, phase.env_steps]
+        + [vars(r) for r in phase.rollouts]
+        for phase in (jacobian, walk)
+    ]
+    state = algo.state_dict()
+    check("vppo_phases", digest(results, state["jacobian_critic"], state["walk_critic"]))
+
+
+def fit_digest(run_dir: Path) -> str:
+    """Digest of a run's three archives, its emitter and its metrics (timings left out)."""
+    state = torch.load(run_dir / "checkpoints" / "last.pt", weights_only=False)
+    scheduler = pickle.loads(state["scheduler"])
+    archives = [pickle.loads(state[f"{which}_archive"]).data() for which in ("true", "learned")] + [
+        scheduler.archive.data()
+    ]
+    assert len(archives[0]["index"]) > 0, "the run filled no cell: nothing to pin"
+    for data in archives:  # cells in index order: the pins must not depend on storage order
+        order = np.argsort(data["index"])
+        for key in data:
+            data[key] = data[key][order]
+    emitter = scheduler.emitters[0]
+    with open(run_dir / "metrics.csv", newline="") as file:
+        rows = [
+            {k: v for k, v in row.items() if not k.startswith("perf/") or k == "perf/env_steps"}
+            for row in csv.DictReader(file)
+        ]
+    return digest(archives, emitter.theta, emitter.coefficient_mean, rows)
+
+
+def test_fit_on_the_true_reward_is_pinned(tmp_path: Path, monkeypatch) -> None:
+    monkeypatch.chdir(tmp_path)
+    main(["fit", str(SMOKE / "walker_true.yaml"), "--qd.iterations", "2", "--name", "true"])
+    check("fit_true", fit_digest(tmp_path / "runs" / "true"))
+
+
+def test_fit_of_wqdil_with_its_bonus_is_pinned(
+    walker_demos: Path, tmp_path: Path, monkeypatch
+) -> None:
+    monkeypatch.chdir(tmp_path)
+    main(
+        [
+            "fit",
+            str(SMOKE / "walker_il.yaml"),
+            "--reward",
+            "mcwae_wgail",
+            "--reward.reward_type",
+            "calibrated",
+            "--bonus.enabled",
+            "true",
+            "--bonus.weight",
+            "0.25",
+            "--demos.path",
+            str(walker_demos),
+            "--qd.iterations",
+            "2",
+            "--name",
+            "wqdil",
+        ]
+    )
+    check("fit_wqdil", fit_digest(tmp_path / "runs" / "wqdil"))
