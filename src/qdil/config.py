@@ -104,18 +104,43 @@ class DemoConfig:
 
 @dataclass
 class BonusConfig:
-    """The single-step archive exploration bonus (decision D5).
+    """An exploration bonus added to the reward model's rewards (any model).
 
     Attributes:
-        enabled: add r_exp = 1 / (1 + p(δ(s))) to the reward model's rewards.
-        weight: multiplier of r_exp (the paper: 1).
-        cells: cells per measure of the single-step archive; ``null`` uses the 2^k binary
-            contact patterns (the measures are 0/1 flags).
+        enabled: add the bonus.
+        type: ``single_step``: WQDIL's single-step archive bonus (decision D5),
+            r_exp = 1 / (1 + p(δ(s))) on every step, training and evaluation
+            (docs/rewards/bonus.md). ``ebc``: Extrinsic Behavioral Curiosity, offset + weight
+            on every step of a training rollout whose mean measure falls in an unoccupied
+            cell of the CMA-MAE archive (docs/rewards/ebc.md).
+        weight: multiplier of the bonus: w of r_exp (the WQDIL paper: 1), or q of EBC (the
+            EBC runners: 2).
+        cells: ``single_step`` only: cells per measure of the single-step archive; ``null``
+            uses the 2^k binary contact patterns (the measures are 0/1 flags).
+        offset: ``ebc`` only: p, added to every training step whatever the cell (the EBC
+            runners: 0).
     """
 
     enabled: bool = False
+    type: Literal["single_step", "ebc"] = "single_step"
     weight: float = 1.0
     cells: int | None = None
+    offset: float = 0.0
+
+    def problems(self) -> list[str]:
+        """Settings that do not apply to ``type``, each naming its key (empty if none)."""
+        problems = []
+        if self.type != "single_step" and self.cells is not None:
+            problems.append(
+                f"bonus.cells applies to bonus.type single_step only (the {self.type} bonus "
+                f"uses the archive's qd.cells); remove it or set it to null, got {self.cells}"
+            )
+        if self.type != "ebc" and self.offset != 0.0:
+            problems.append(
+                f"bonus.offset applies to bonus.type ebc only; remove it or set it to 0, "
+                f"got {self.offset}"
+            )
+        return problems
 
 
 @dataclass

@@ -67,7 +67,8 @@ def recipe(
         env: the task and its simulations.
         qd: archives, emitter, scheduler and evaluation.
         rl: the gradient estimator (``class_path``: ``qdil.rl.VPPO`` or a subclass).
-        bonus: the single-step archive exploration bonus.
+        bonus: an exploration bonus added to any reward model (``type``: ``single_step``
+            or ``ebc``).
         demos: demonstrations for the reward model.
         logging: run directory, checkpoints, W&B.
         seed: the run's seed; every random stream derives from it.
@@ -82,7 +83,8 @@ def check_values(config: Namespace) -> list[str]:
         config: the namespace ``qdil fit``'s parser returned.
 
     Returns:
-        One message per key below its minimum (empty if all is well).
+        One message per key below its minimum or not applying to the chosen bonus type
+        (empty if all is well).
     """
     problems = []
     for key, low in MINIMUMS.items():
@@ -91,6 +93,9 @@ def check_values(config: Namespace) -> list[str]:
             problems.append(
                 f"{key} must be at least {low}, got {value}; set it in the recipe or with --{key} N"
             )
+    bonus = config.get("bonus")
+    if isinstance(bonus, Namespace):
+        problems += BonusConfig(**bonus.as_dict()).problems()
     reward = config.get("reward")
     path = reward.get("class_path") if isinstance(reward, Namespace) else None
     if isinstance(path, str):

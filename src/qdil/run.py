@@ -18,6 +18,7 @@ from qdil.qd.emitter import PPGAEmitter
 from qdil.qd.state import LoopState, Run
 from qdil.rewards.base import RewardModel
 from qdil.rewards.bonus import ExplorationBonus
+from qdil.rewards.ebc import EBCBonus
 from qdil.rl.networks import VectorizedActor
 from qdil.rl.normalize import RunningMeanStd
 from qdil.rl.vppo import VPPO
@@ -26,6 +27,23 @@ from qdil.tracking import Tracker
 
 def _seeds(seed: int, count: int) -> list[int]:
     return [int(s.generate_state(1)[0]) for s in np.random.SeedSequence(seed).spawn(count)]
+
+
+def with_bonus(model: RewardModel, bonus: BonusConfig, archives: RunArchives) -> RewardModel:
+    """``model`` wrapped in the recipe's exploration bonus, or ``model`` if it is disabled.
+
+    Raises:
+        ValueError: for a setting that does not apply to ``bonus.type``, naming its key.
+    """
+    problems = bonus.problems()
+    if problems:
+        raise ValueError("; ".join(problems))
+    if not bonus.enabled:
+        return model
+    if bonus.type == "ebc":
+        # read through the container: a resume replaces archives.main with the checkpoint's
+        return EBCBonus(model, lambda: archives.main, weight=bonus.weight, offset=bonus.offset)
+    return ExplorationBonus(model, weight=bonus.weight, cells=bonus.cells)
 
 
 def build_run(
@@ -143,8 +161,7 @@ def build_run(
         optimizers = [optimizers]
     if optimizers:
         _, *optimizers = fabric.setup(model, *optimizers)
-    if bonus.enabled:
-        model = ExplorationBonus(model, weight=bonus.weight, cells=bonus.cells)
+    model = with_bonus(model, bonus, archives)
     demo_set = None
     if model.needs_demos:
         if demos.path is None:

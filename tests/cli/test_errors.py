@@ -116,6 +116,18 @@ CASES = {
         ["logging.checkpoint_every must be at least 1, got 0"],
     ),
     "seed -5": (["fit", "{smoke}", "--seed", "-5"], ["seed must be at least 0, got -5"]),
+    "bonus type unknown": (
+        ["fit", "{smoke}", "--bonus.type", "count"],
+        ['"bonus.type"', "single_step", "ebc", "count"],
+    ),
+    "bonus cells under ebc": (
+        ["fit", "{smoke}", "--bonus.type", "ebc", "--bonus.cells", "4"],
+        ["bonus.cells applies to bonus.type single_step only", "got 4"],
+    ),
+    "bonus offset under single_step": (
+        ["fit", "{smoke}", "--bonus.offset", "1"],
+        ["bonus.offset applies to bonus.type ebc only", "got 1.0"],
+    ),
     "recipe is a directory": (["fit", "{empty}"], ["{empty}", "is a directory"]),
     "emitter in a missing module (recipe)": (
         ["fit", "{bad_recipe}"],

@@ -29,6 +29,13 @@ try:  # the example plugin package, installed by the README's test command
     FAMILIES["vail"] = []
 except ImportError:
     pass
+try:  # the DiffAIL plugin package, installed by the README's test command
+    import qdil_diffail  # noqa: F401
+
+    # two of the 100 diffusion steps keep the reward's cost small in the smoke run
+    FAMILIES["diffail"] = ["--reward.reward_timesteps", "2"]
+except ImportError:
+    pass
 
 
 @pytest.mark.parametrize("reward", list(FAMILIES))
@@ -74,6 +81,44 @@ def test_fit_runs_each_reward_family(
         assert last["reward/learned_per_step"] == last["reward/train_per_step"]
     if reward == "wae_wgail":  # standardized: the policy's spread is measured and logged
         assert float(last["reward/critic_policy_std"]) > 0
+
+
+def metrics_of(run_dir: Path) -> list[dict[str, str]]:
+    with open(run_dir / "metrics.csv", newline="") as file:
+        return list(csv.DictReader(file))
+
+
+def test_fit_with_the_ebc_bonus_resumes_with_the_checkpoints_archive(
+    walker_demos: Path, tmp_path: Path, monkeypatch
+) -> None:
+    """EBC through the real command line; a resumed run continues exactly.
+
+    The bonus reads the CMA-MAE archive, which a resume restores from the checkpoint. On a
+    2×2 grid most rollout windows of iteration 2 fall in cells iteration 1 filled, so a
+    bonus still reading the empty archive of the rebuilt run would pay every window.
+    """
+    monkeypatch.chdir(tmp_path)
+    args = [
+        "fit",
+        str(RECIPE),
+        *("--demos.path", str(walker_demos)),
+        *("--bonus.enabled", "true", "--bonus.type", "ebc", "--bonus.weight", "2"),
+        *("--qd.cells", "2", "--logging.checkpoint_every", "1"),
+    ]
+    main([*args, "--name", "whole", "--qd.iterations", "2"])
+    main([*args, "--name", "split", "--qd.iterations", "1"])
+    main(["fit", "--resume", "runs/split", "--qd.iterations", "2"])
+    whole, split = metrics_of(tmp_path / "runs" / "whole"), metrics_of(tmp_path / "runs" / "split")
+    assert [r["iteration"] for r in split] == ["1", "2"]
+    for key in whole[-1]:
+        if not key.startswith("perf/"):
+            assert split[-1][key] == whole[-1][key], key
+    last = whole[-1]
+    share = float(last["reward/bonus_novel_share"])
+    assert 0.0 <= share < 1.0
+    learned, bonus = float(last["reward/learned_per_step"]), float(last["reward/bonus_per_step"])
+    assert bonus == pytest.approx(2.0 * share, rel=1e-6)  # valid steps: whole windows
+    assert learned + bonus == pytest.approx(float(last["reward/train_per_step"]), rel=1e-4)
 
 
 def test_imitation_without_demos_is_refused(tmp_path: Path, monkeypatch) -> None:

@@ -189,6 +189,8 @@ def test_pvalue_bold_at_and_below_alpha() -> None:
         ),
         ({"reward": {"class_path": "plug.MyReward"}, "bonus": {"enabled": True}}, "MyReward-Bonus"),
         ({"reward": "gail"}, "GAIL"),
+        ({"reward": "gail", "bonus": {"enabled": True, "type": "ebc"}}, "GAIL-EBC"),
+        ({"reward": "diffail", "bonus": {"enabled": True, "type": "single_step"}}, "DiffAIL-Bonus"),
     ],
 )
 def test_method_labels(config: dict, label: str) -> None:

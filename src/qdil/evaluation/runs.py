@@ -54,6 +54,7 @@ DISPLAY_NAMES: dict[str, str] = {
     "mcwae_wgail": "mCWAE-WGAIL",
     "mcwae_gail": "mCWAE-GAIL",
     "vail": "VAIL",
+    "diffail": "DiffAIL",
 }
 """Registry names of reward models -> the names the paper's tables use."""
 
@@ -172,7 +173,7 @@ def reward_name(config: Mapping[str, Any]) -> str:
 
 
 def method_label(config: Mapping[str, Any]) -> str:
-    """The paper's name of a run's method: reward model plus ``-Bonus`` if the bonus is on.
+    """The paper's name of a run's method: reward model plus ``-Bonus`` or ``-EBC``.
 
     Registry names map through :data:`DISPLAY_NAMES` (``mcwae_wgail`` -> ``mCWAE-WGAIL``);
     unknown names stay as they are.
@@ -184,7 +185,7 @@ def method_label(config: Mapping[str, Any]) -> str:
     label = DISPLAY_NAMES.get(name, DISPLAY_NAMES.get(name.lower(), name))
     bonus = config.get("bonus") or {}
     if isinstance(bonus, Mapping) and bonus.get("enabled"):
-        label += "-Bonus"
+        label += "-EBC" if bonus.get("type") == "ebc" else "-Bonus"
     return label
 
 

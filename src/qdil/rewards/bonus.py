@@ -13,21 +13,19 @@ whole run and go into checkpoints. The bonus lies in [weight/2, weight).
 
 from __future__ import annotations
 
-from typing import Any
-
 import torch
 from typing_extensions import override
 
-from qdil.data import Rollout, TransitionBatch
-from qdil.demos.dataset import DemoSet
+from qdil.data import Rollout
 from qdil.rewards.base import RewardModel
+from qdil.rewards.wrapper import BonusWrapper
 
 
-class ExplorationBonus(RewardModel):
-    """Adds the single-step archive bonus to any reward model.
+class ExplorationBonus(BonusWrapper):
+    """Adds the single-step archive bonus to any reward model (``bonus.type: single_step``).
 
     Forwards ``setup`` and ``update`` to the wrapped model; changes only the rewards
-    handed to RL, so the wrapped model's training is untouched.
+    handed to RL and to the evaluations, so the wrapped model's training is untouched.
 
     Args:
         model: the wrapped reward model.
@@ -36,25 +34,14 @@ class ExplorationBonus(RewardModel):
     """
 
     def __init__(self, model: RewardModel, weight: float = 1.0, cells: int | None = None) -> None:
-        super().__init__(model.obs_dim, model.action_dim, model.num_measures)
+        super().__init__(model, weight, suffix="bonus")
         if cells is not None and cells < 1:
             raise ValueError(f"bonus.cells must be positive or null, got {cells}")
-        self.model = model
-        self.weight = weight
         self.cells = cells
         per_measure = 2 if cells is None else cells
         self.register_buffer(
             "counts", torch.ones(per_measure**model.num_measures, dtype=torch.float64)
         )
-        # sums over this iteration's valid training steps: learned reward, bonus, steps
-        self._balance = torch.zeros(3, dtype=torch.float64)
-        self.name = f"{model.name}+bonus" if model.name else "bonus"
-        self.learned = model.learned
-        self.needs_demos = model.needs_demos
-        self.needs_log_probs = model.needs_log_probs
-        self.needs_next_obs = model.needs_next_obs
-        self.uses_measures = model.uses_measures
-        self.prefers_expert = model.prefers_expert
 
     def cell(self, measures: torch.Tensor) -> torch.Tensor:
         """(...,) single-step archive cell of δ (..., k)."""
@@ -86,61 +73,12 @@ class ExplorationBonus(RewardModel):
         return (1.0 / (1.0 + p)).float()
 
     @override
-    def setup(self, demos: DemoSet | None) -> None:
-        self.model.setup(demos)
+    def added(self, rollout: Rollout, update: bool) -> torch.Tensor:
+        # evaluations get the bonus too (from the current counts, adding no visits): the
+        # archive ranks by learned return + bonus, as the WQDIL paper's algorithm does
+        return self.weight * self.bonus(rollout, update)
 
     @override
-    def pretrain(self, demos: DemoSet | None) -> None:
-        self.model.pretrain(demos)
-
-    @override
-    def configure_optimizers(self) -> Any:
-        return self.model.configure_optimizers()
-
-    @override
-    def reward(self, batch: TransitionBatch) -> torch.Tensor:
-        return self.model.reward(batch)
-
-    @override
-    def update(
-        self, expert: TransitionBatch | None, policy: TransitionBatch, iteration: int
-    ) -> dict[str, float]:
-        metrics = self.model.update(expert, policy, iteration)
+    def bonus_metrics(self) -> dict[str, float]:
         share = self.counts / self.counts.sum()
-        learned, bonus, steps = self._balance.tolist()
-        self._balance.zero_()
-        steps = max(steps, 1.0)
-        return {
-            **metrics,
-            "learned_per_step": learned / steps,
-            "bonus_per_step": bonus / steps,
-            "bonus_min_share": float(share.min()),
-            "bonus_max_share": float(share.max()),
-        }
-
-    @override
-    @torch.no_grad()
-    def predict_reward(self, rollout: Rollout, *, update: bool = False) -> torch.Tensor:
-        base = self.model.predict_reward(rollout, update=update)
-        bonus = self.weight * self.bonus(rollout, update)
-        if update:  # the balance a user watches: learned reward and bonus per training step
-            valid = rollout.valid > 0
-            self._balance += torch.tensor(
-                [float(base[valid].sum()), float(bonus[valid].sum()), float(valid.sum())],
-                dtype=torch.float64,
-            )
-        return base + bonus
-
-    @override
-    def check_finite(self, value: torch.Tensor, what: str, iteration: int) -> None:
-        # the bonus lies in [weight/2, weight): non-finite values come from the wrapped
-        # model, which the message must name (with its own advice: learned or fixed)
-        self.model.check_finite(value, what, iteration)
-
-    @override
-    def extra_state(self) -> dict[str, Any]:
-        return self.model.extra_state()
-
-    @override
-    def load_extra_state(self, state: dict[str, Any]) -> None:
-        self.model.load_extra_state(state)
+        return {"bonus_min_share": float(share.min()), "bonus_max_share": float(share.max())}

@@ -28,11 +28,13 @@ from collections.abc import Callable
 import numpy as np
 import torch
 from lightning import Fabric
+from ribs.archives import GridArchive
 
 from qdil.data import Rollout, TransitionBatch
 from qdil.demos.dataset import DemoSet
 from qdil.rewards.base import RewardModel
 from qdil.rewards.bonus import ExplorationBonus
+from qdil.rewards.ebc import EBCBonus
 from qdil.rewards.registry import get_reward
 
 OBS, ACT, K = 5, 2, 2
@@ -209,6 +211,27 @@ def works_under_the_exploration_bonus(name: str) -> str | None:
     return None
 
 
+def works_under_the_ebc_bonus(name: str) -> str | None:
+    """Under EBC (q = 2, p = 0.5) training windows get 2.5 (empty cell) or 0.5 (occupied).
+
+    Evaluations get nothing, and the flags pass through.
+    """
+    model = trained(name, updates=1)
+    archive = GridArchive(solution_dim=1, dims=[10] * K, ranges=[(0.0, 1.0)] * K)
+    archive.add(np.zeros((1, 1)), np.zeros(1), np.array([[0.05, 0.95]]))  # the policy's cell
+    wrapped = EBCBonus(model, lambda: archive, weight=2.0, offset=0.5)
+    policy = as_rollout(policy_data(), envs=4)  # contacts (0, 1) at every step: occupied
+    expert = as_rollout(expert_data(), envs=4)  # contacts (1, 0): an empty cell
+    for rollout, expected in ((policy, 0.5), (expert, 2.5)):
+        extra = wrapped.predict_reward(rollout, update=True) - model.predict_reward(rollout)
+        torch.testing.assert_close(extra, torch.full_like(extra, expected), atol=1e-5, rtol=0)
+    extra = wrapped.predict_reward(expert) - model.predict_reward(expert)
+    expect(torch.all(extra == 0), f"{name}: the EBC bonus reached an evaluation")
+    expect(wrapped.learned == model.learned, f"{name}: the EBC bonus changed learned")
+    expect(wrapped.needs_demos == model.needs_demos, f"{name}: EBC changed needs_demos")
+    return None
+
+
 # Each check takes a registered name; it returns None when it passes, a note when it does
 # not apply to the model, and raises AssertionError naming what failed.
 CHECKS: dict[str, Callable[[str], str | None]] = {
@@ -219,6 +242,7 @@ CHECKS: dict[str, Callable[[str], str | None]] = {
         tells_expert_from_non_expert_transitions,
         state_survives_a_checkpoint_round_trip,
         works_under_the_exploration_bonus,
+        works_under_the_ebc_bonus,
     )
 }
 
