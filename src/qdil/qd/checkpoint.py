@@ -41,7 +41,12 @@ CHECKPOINT = Path("checkpoints") / "last.pt"
 RESUMABLE_KEYS = ("qd.iterations", "env.num_threads", "logging")
 # Recipe keys added after checkpoints stored their recipe, with the value that runs made
 # before them used implicitly: a checkpoint without the key resumes when it has that value.
-IMPLICIT_KEYS = {"env.backend": "mujoco", "env.device": "cpu"}
+IMPLICIT_KEYS = {
+    "env.backend": "mujoco",
+    "env.device": "cpu",
+    "bonus.type": "single_step",
+    "bonus.offset": 0.0,
+}
 
 
 class CheckpointError(RuntimeError):
