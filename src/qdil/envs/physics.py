@@ -157,6 +157,35 @@ class Export:
     stop: int | None = None
 
 
+def export_bounds(probe: mujoco.MjData, exports: dict[str, Export]) -> list[tuple[str, int, int]]:
+    """(field, start, stop) of each export in the flattened ``MjData`` field, validated.
+
+    Raises:
+        ValueError: if an export names an unknown field or a slice outside it.
+    """
+    bounds = []
+    for name, export in exports.items():
+        if not hasattr(probe, export.field):
+            raise ValueError(f"export {name!r}: MjData has no field {export.field!r}")
+        size = np.asarray(getattr(probe, export.field)).size
+        stop = size if export.stop is None else export.stop
+        if not 0 <= export.start < stop <= size:
+            raise ValueError(
+                f"export {name!r}: [{export.start}:{stop}] is outside {export.field} of size {size}"
+            )
+        bounds.append((export.field, export.start, stop))
+    return bounds
+
+
+def export_slices(bounds: list[tuple[str, int, int]], names: list[str]) -> dict[str, slice]:
+    """The columns of each named export in the concatenated (N, E) export array."""
+    slices, width = {}, 0
+    for name, (_, start, stop) in zip(names, bounds, strict=True):
+        slices[name] = slice(width, width + stop - start)
+        width += stop - start
+    return slices
+
+
 def default_num_threads() -> int:
     """Threads for physics: ``$QDIL_NUM_THREADS`` if set, else every core this process may use."""
     configured = os.environ.get("QDIL_NUM_THREADS")
@@ -219,26 +248,12 @@ class MujocoBatch:
         self._qvel_ptrs = self._pointers("qvel")
         self._sensor_ptrs = self._pointers("sensordata")
 
-        self._slices: dict[str, tuple[slice, tuple[int, ...]]] = {}
-        sources, lengths, offsets = [], [], []
-        width = 0
-        probe = self.datas[0]
-        for name, export in exports.items():
-            if not hasattr(probe, export.field):
-                raise ValueError(f"export {name!r}: MjData has no field {export.field!r}")
-            flat = np.asarray(getattr(probe, export.field)).reshape(-1)
-            stop = flat.size if export.stop is None else export.stop
-            if not 0 <= export.start < stop <= flat.size:
-                raise ValueError(
-                    f"export {name!r}: [{export.start}:{stop}] is outside "
-                    f"{export.field} of size {flat.size}"
-                )
-            length = stop - export.start
-            sources.append(self._pointers(export.field) + 8 * export.start)
-            lengths.append(length)
-            offsets.append(width)
-            self._slices[name] = (slice(width, width + length), (length,))
-            width += length
+        bounds = export_bounds(self.datas[0], exports)
+        self._slices = export_slices(bounds, list(exports))
+        sources = [self._pointers(field) + 8 * start for field, start, _ in bounds]
+        lengths = [stop - start for _, start, stop in bounds]
+        offsets = [columns.start for columns in self._slices.values()]
+        width = sum(lengths)
         self._sources = np.array(sources, dtype=np.int64).reshape(len(sources), num_sims)
         self._lengths = np.array(lengths, dtype=np.int32)
         self._offsets = np.array(offsets, dtype=np.int32)
@@ -251,8 +266,7 @@ class MujocoBatch:
 
     def view(self, name: str) -> np.ndarray:
         """The (N, length) columns of :attr:`exported` that hold export ``name``."""
-        columns, _ = self._slices[name]
-        return self.exported[:, columns]
+        return self.exported[:, self._slices[name]]
 
     def step(self, ctrl: np.ndarray, nstep: int, active: np.ndarray | None = None) -> None:
         """Set controls and advance the active simulations by ``nstep`` substeps.

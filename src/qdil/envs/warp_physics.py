@@ -30,9 +30,7 @@ import mujoco
 import numpy as np
 import torch
 
-from qdil.envs.physics import Export
-
-_STATE = None  # mujoco_warp.State.INTEGRATION, set on import of mujoco_warp
+from qdil.envs.physics import Export, export_bounds, export_slices
 
 
 def import_warp() -> tuple[Any, Any]:
@@ -113,8 +111,8 @@ class WarpBatch:
                 "Newton-solver variant (e.g. Humanoid-v5-newton) with env.backend: warp"
             )
         self.warp, self.mjw = import_warp()
-        global _STATE
-        _STATE = int(self.mjw.State.INTEGRATION)
+        # the whole integration state (time, qpos, qvel, act, warm start, ctrl, ...)
+        self._state = int(self.mjw.State.INTEGRATION)
         self.model = model
         self.num_sims = num_sims
         self.num_threads = 1
@@ -123,29 +121,18 @@ class WarpBatch:
         with self.warp.ScopedDevice(self.device):
             self.wmodel = self.mjw.put_model(model)
             self.wdata = self.mjw.make_data(model, nworld=num_sims)
-            size = mujoco.mj_stateSize(model, _STATE)
+            size = mujoco.mj_stateSize(model, self._state)
             self._saved = self.warp.zeros((num_sims, size), dtype=float)
             self._keep = self.warp.zeros(num_sims, dtype=bool)
             self._reset_mask = self.warp.zeros(num_sims, dtype=bool)
         self._torch_device = torch.device("cpu" if self.device == "cpu" else self.device)
 
-        probe = mujoco.MjData(model)
-        self._fields: list[tuple[str, int, int]] = []
-        self._slices: dict[str, tuple[slice, tuple[int, ...]]] = {}
-        width = 0
-        for name, export in exports.items():
-            if not hasattr(probe, export.field) or not hasattr(self.wdata, export.field):
-                raise ValueError(f"export {name!r}: MjData has no field {export.field!r}")
-            flat = np.asarray(getattr(probe, export.field)).reshape(-1)
-            stop = flat.size if export.stop is None else export.stop
-            if not 0 <= export.start < stop <= flat.size:
-                raise ValueError(
-                    f"export {name!r}: [{export.start}:{stop}] is outside "
-                    f"{export.field} of size {flat.size}"
-                )
-            self._fields.append((export.field, export.start, stop))
-            self._slices[name] = (slice(width, width + stop - export.start), (stop - export.start,))
-            width += stop - export.start
+        self._fields = export_bounds(mujoco.MjData(model), exports)
+        self._slices = export_slices(self._fields, list(exports))
+        for field, _, _ in self._fields:
+            if not hasattr(self.wdata, field):
+                raise ValueError(f"export of {field!r}: MuJoCo Warp's Data has no such field")
+        width = sum(stop - start for _, start, stop in self._fields)
         self.torch_exported = torch.zeros((num_sims, width), device=self._torch_device)
         self.torch_sensordata = torch.zeros(
             (num_sims, model.nsensordata), device=self._torch_device
@@ -163,8 +150,7 @@ class WarpBatch:
 
     def view(self, name: str) -> np.ndarray:
         """The (N, length) columns of :attr:`exported` that hold export ``name``."""
-        columns, _ = self._slices[name]
-        return self.exported[:, columns]
+        return self.exported[:, self._slices[name]]
 
     def step(self, ctrl: np.ndarray, nstep: int, active: np.ndarray | None = None) -> None:
         """Set controls and advance the active simulations by ``nstep`` substeps.
@@ -179,16 +165,16 @@ class WarpBatch:
         with warp.ScopedDevice(self.device):
             if keep is not None:  # remember the worlds that sit out, to restore them after
                 warp.to_torch(self._keep).copy_(torch.from_numpy(keep))
-                mjw.get_state(self.wmodel, self.wdata, self._saved, _STATE)
+                mjw.get_state(self.wmodel, self.wdata, self._saved, self._state)
             self._ctrl.copy_(torch.as_tensor(ctrl, dtype=torch.float32))
             for _ in range(nstep):
                 mjw.step(self.wmodel, self.wdata)
             if self.rne_post_constraint:
                 mjw.rne_postconstraint(self.wmodel, self.wdata)
             if keep is not None:
-                mjw.set_state(self.wmodel, self.wdata, self._saved, _STATE, self._keep)
-            rows = None if keep is None else torch.from_numpy(~keep).to(self._torch_device)
-            rows = None if rows is None else rows.nonzero().squeeze(1)
+                mjw.set_state(self.wmodel, self.wdata, self._saved, self._state, self._keep)
+            rows = None if keep is None else torch.from_numpy(np.flatnonzero(~keep))
+            rows = None if rows is None else rows.to(self._torch_device)
             # exports read the post-step data (cfrc_ext, ...) before collision overwrites it
             parts = [self._tensor(f)[:, a:b].clone() for f, a, b in self._fields]
             if self.model.nsensordata:
