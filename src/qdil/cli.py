@@ -470,6 +470,12 @@ def report(argv: list[str]) -> None:
         metavar="METHOD",
         help="Tukey table: only pairs with this method, as group2 (the paper's layout)",
     )
+    parser.add_argument(
+        "--no-records",
+        action="store_true",
+        help="do not keep records of the runs in OUT/runs/ (config, curves, final archive "
+        "without policies: enough to make the report again when the runs are gone)",
+    )
     args = parser.parse_args(argv)
     labels = {}
     for item in args.label:
@@ -479,7 +485,13 @@ def report(argv: list[str]) -> None:
         labels[path] = label
     from qdil.evaluation.report import write_report
 
-    made = write_report(args.paths, args.out, labels=labels, reference=args.reference)
+    made = write_report(
+        args.paths,
+        args.out,
+        labels=labels,
+        reference=args.reference,
+        records=not args.no_records,
+    )
     left_out = [run for run in made.runs if not run.included]
     unfinished = [run for run in made.runs if run.included and run.unfinished]
     print(made.main_table or "no run could be included")

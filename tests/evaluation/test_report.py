@@ -7,6 +7,7 @@ import csv
 import io
 import json
 import os
+import pickle
 import shutil
 import statistics
 import subprocess
@@ -21,7 +22,13 @@ from ribs.archives import GridArchive
 from scipy.stats import tukey_hsd
 
 from qdil.evaluation import document as doc
-from qdil.evaluation.report import colour_range, format_pvalue, main_table, tukey_tests
+from qdil.evaluation.report import (
+    colour_range,
+    format_pvalue,
+    main_table,
+    tukey_tests,
+    write_report,
+)
 from qdil.evaluation.runs import (
     RunResult,
     collect_runs,
@@ -388,3 +395,52 @@ def test_label_override(made: SimpleNamespace) -> None:
     runs = collect_runs([made.runs / "true2"], labels={str(made.runs / "true2"): "Custom"})
     assert [(r.method, r.status) for r in runs] == [("Custom", "included")]
     assert runs[0].archive is not None and len(runs[0].archive) > 0
+
+
+def test_records_remake_the_same_report_without_checkpoints(
+    made: SimpleNamespace, tmp_path: Path
+) -> None:
+    kept = made.out / "runs"
+    # every included run is kept, none of the left-out ones, and no policy goes with them
+    assert sorted(p.name for p in kept.iterdir()) == sorted(
+        ["true0", "true1", "true2", "airl0", "airl1", "airl2", "giril0"]
+    )
+    assert not list(kept.rglob("*.pt")) and not list(kept.rglob("*.pkl"))
+    assert (kept / "airl0" / "eval.json").is_file() and not (kept / "true0" / "eval.json").exists()
+    # the records alone, moved elsewhere, give the same tables
+    moved = shutil.copytree(kept, tmp_path / "records")
+    again = write_report([moved], tmp_path / "again")
+    before, after = read_csv(made.out / "runs.csv"), read_csv(tmp_path / "again" / "runs.csv")
+    before = {Path(r["path"]).name: r for r in before if r["status"] != "left out"}
+    after = {Path(r["path"]).name: r for r in after}
+    assert before.keys() == after.keys()
+    for name, row in after.items():
+        assert row["status"] == before[name]["status"] and row["iteration"]
+        for key in ("qd_score", "qd_score_offset", "coverage_pct", "obj_max", "obj_mean"):
+            assert float(row[key]) == float(before[name][key]), (name, key)
+        assert row["source"].startswith(before[name]["source"])
+        assert "from the record of" in row["source"]
+    assert (tmp_path / "again" / "table.csv").read_text() == (made.out / "table.csv").read_text()
+    assert (tmp_path / "again" / "tukey.csv").read_text() == (made.out / "tukey.csv").read_text()
+    # the corrected archive of a re-scored run is the one kept, cell for cell
+    (airl0,) = [r for r in again.runs if r.path.name == "airl0"]
+    with open(made.runs / "airl0" / "corrected_archive.pkl", "rb") as file:
+        corrected = pickle.load(file)
+    expected = corrected.data(["index", "objective"])
+    got = airl0.archive.data(["index", "objective"])
+    order, order_got = np.argsort(expected["index"]), np.argsort(got["index"])
+    assert np.array_equal(expected["index"][order], got["index"][order_got])
+    assert np.array_equal(expected["objective"][order], got["objective"][order_got])
+    # records of records are copied as they are
+    assert (tmp_path / "again" / "runs" / "true0" / "record.json").read_text() == (
+        kept / "true0" / "record.json"
+    ).read_text()
+
+
+def test_an_unreadable_record_is_left_out_with_its_reason(
+    made: SimpleNamespace, tmp_path: Path
+) -> None:
+    record = shutil.copytree(made.out / "runs" / "true0", tmp_path / "true0")
+    (record / "archive.csv").unlink()
+    (run,) = collect_runs([record])
+    assert run.status == "left out" and "record unreadable" in run.problems[0]

@@ -25,8 +25,9 @@ QD-Score (PPGA's convention, :data:`qdil.qd.archives.QD_OFFSETS`).
 
 Files written into the output folder: ``report.md`` and ``report.html`` (everything on one
 page), ``table.md`` / ``table.csv`` (main table), ``tukey.md`` / ``tukey.csv``,
-``runs.csv`` (every run, its status and final metrics), ``heatmaps/*.png`` and
-``curves/*.png``.
+``runs.csv`` (every run, its status and final metrics), ``heatmaps/*.png``,
+``curves/*.png`` and ``runs/`` (a record of every included run, :mod:`qdil.evaluation.records`:
+the report can be made again from them when the run directories are gone).
 
 The pieces: :mod:`qdil.evaluation.tables` (numbers), :mod:`qdil.evaluation.figures`
 (heatmaps and curves) and :mod:`qdil.evaluation.page` (the document); this module collects
@@ -47,7 +48,9 @@ from qdil.evaluation.figures import (
     plot_heatmaps,
 )
 from qdil.evaluation.page import Report, build_document
+from qdil.evaluation.records import write_record
 from qdil.evaluation.runs import (
+    RunResult,
     collect_runs,
     flag_duplicate_seeds,
     group_runs,
@@ -95,6 +98,7 @@ def write_report(
     out: str | Path,
     labels: Mapping[str | Path, str] | None = None,
     reference: str | None = None,
+    records: bool = True,
 ) -> Report:
     """Collect runs and write the whole report into ``out``.
 
@@ -104,6 +108,8 @@ def write_report(
         labels: run directory -> method label, overriding :func:`method_label`.
         reference: method the Tukey table compares every other method with (all pairs if
             ``None``).
+        records: keep a record of every included run in ``out/runs/`` (see
+            :mod:`qdil.evaluation.records`).
 
     Returns:
         What was written (also the data behind it).
@@ -119,7 +125,33 @@ def write_report(
     heatmaps = plot_heatmaps(groups, out)
     curves = plot_curves(groups, out)
     _write_files(report, heatmaps, curves)
+    if records:
+        report.files += keep_records(runs, out / "runs")
     return report
+
+
+def keep_records(runs: Iterable[RunResult], folder: Path) -> list[str]:
+    """Write the record of every included run into ``folder``, one sub-folder per run.
+
+    Args:
+        runs: the report's runs; left-out ones are skipped.
+        folder: where the records go (created).
+
+    Returns:
+        The records' folders, relative to ``folder``'s parent.
+    """
+    written, names = [], set()
+    for run in runs:
+        if not run.included:
+            continue
+        name, n = run.path.name, 1
+        while name in names:  # two runs of the same name from different folders
+            n += 1
+            name = f"{run.path.name}-{n}"
+        names.add(name)
+        write_record(run, folder / name)
+        written.append(f"{folder.name}/{name}")
+    return written
 
 
 def _write_files(

@@ -7,7 +7,8 @@ Which runs go in:
   left out.
 - A run is **left out** when its ``config.yaml`` is unreadable or names no ``env.task``,
   when it has no ``metrics.csv`` (or the file has no rows), or when it has no readable
-  checkpoint (``checkpoints/last.pt``). Left-out runs are listed with the reason; they are
+  checkpoint (``checkpoints/last.pt``) and is not a record that a report kept
+  (:mod:`qdil.evaluation.records`). Left-out runs are listed with the reason; they are
   never dropped silently.
 - A run is **unfinished** when its last logged iteration or its checkpoint's iteration is
   below ``qd.iterations``. Unfinished runs that have a checkpoint are still included, at
@@ -35,6 +36,7 @@ import numpy as np
 import yaml
 from ribs.archives import GridArchive
 
+from qdil.evaluation.records import is_record, read_record
 from qdil.evaluation.rescore import CORRECTED, EVAL_JSON
 from qdil.qd.archives import QD_OFFSETS, qd_metrics
 from qdil.qd.checkpoint import CheckpointError, load_archive
@@ -240,6 +242,9 @@ def light_copy(archive: GridArchive) -> GridArchive:
 
 def _final_archive(run: RunResult) -> None:
     """Fill ``run``'s final archive, metrics and source (corrected archive preferred)."""
+    if is_record(run.path):
+        read_record(run)
+        return
     try:
         archive, run.iteration = load_archive(run.path, "true")
     except CheckpointError as error:
