@@ -5,15 +5,20 @@ For each task, with random actions drawn up front:
 - ``qdil``: ``gymnasium.make_vec("qdil/<Task>-v5", num_envs=N)`` (foot-contact measures on,
   autoreset on), physics on every core, and with one physics thread;
 - ``gym sync``: ``gymnasium.make_vec("<Task>-v5", num_envs=N, vectorization_mode="sync")``;
+- ``envpool``: ``envpool.make_gymnasium("<Task>-v4", num_envs=N, batch_size=N)`` (envpool
+  1.2.5 has the v4 tasks, the same bodies as v5 but for v5's model fixes; it computes no foot
+  contacts), on every core and on one thread, when envpool is installed
+  (``pip install envpool==1.2.5``); the table says "not installed" otherwise;
 - ``raw mj_step``: one ``MjData`` stepped by ``mujoco.mj_step(m, d, frame_skip)`` in a Python
   loop on one core, reset when unhealthy: the bare cost of the physics.
 
-Each number is the median of ``--reps`` timed repetitions after one warm-up. Ratios are
-against gymnasium's sync vector env measured in the same run.
+The contestants run in alternating rounds (one timed repetition of each per round, after one
+warm-up each), so a machine whose load drifts slows them alike; each number is the median of
+``--reps`` rounds. Ratios compare numbers of the same run.
 
 Usage::
 
-    python benchmarks/bench_envs.py [--tasks Walker2d-v5 ...] [--num-envs 64] [--steps 200]
+    python benchmarks/bench_envs.py [--tasks Walker2d-v5 ...] [--num-envs 64 256] [--steps 200]
 """
 
 from __future__ import annotations
@@ -32,14 +37,40 @@ import qdil  # noqa: F401  (registers qdil/ tasks)
 from qdil.envs.tasks import make_task
 
 
-def _median_rate(run, steps: int, reps: int) -> float:
-    run()  # warm-up: JIT compilation, caches
-    rates = []
+def _median_rates(contestants: dict[str, tuple], reps: int) -> dict[str, float]:
+    """Median env-steps/s of each ``(run, steps)`` contestant over alternating rounds."""
+    for run, _ in contestants.values():
+        run()  # warm-up: JIT compilation, caches
+    rates: dict[str, list[float]] = {name: [] for name in contestants}
     for _ in range(reps):
-        start = time.perf_counter()
-        run()
-        rates.append(steps / (time.perf_counter() - start))
-    return statistics.median(rates)
+        for name, (run, steps) in contestants.items():
+            start = time.perf_counter()
+            run()
+            rates[name].append(steps / (time.perf_counter() - start))
+    return {name: statistics.median(values) for name, values in rates.items()}
+
+
+def make_envpool(task_id: str, num_envs: int, num_threads: int):
+    """envpool's vector env of the task's v4 version, or ``None`` if envpool is missing."""
+    try:
+        import envpool
+    except ImportError:
+        return None
+    env_id = task_id.replace("-v5", "-v4")
+    return envpool.make_gymnasium(
+        env_id, num_envs=num_envs, batch_size=num_envs, num_threads=num_threads, seed=0
+    )
+
+
+def bench_envpool(env, actions: np.ndarray) -> tuple:
+    env.reset()
+    actions = actions.astype(np.float64)
+
+    def run() -> None:
+        for a in actions:
+            env.step(a)
+
+    return run, actions.shape[0] * actions.shape[1]
 
 
 def bench_vector(env: gym.vector.VectorEnv, actions: np.ndarray) -> tuple:
@@ -77,46 +108,57 @@ def main() -> None:
     parser.add_argument(
         "--tasks", nargs="+", default=["Walker2d-v5", "HalfCheetah-v5", "Humanoid-v5"]
     )
-    parser.add_argument("--num-envs", type=int, default=64)
+    parser.add_argument("--num-envs", type=int, nargs="+", default=[64])
     parser.add_argument("--steps", type=int, default=200, help="vector steps per repetition")
-    parser.add_argument("--reps", type=int, default=5)
+    parser.add_argument("--reps", type=int, default=5, help="alternating timed rounds")
+    parser.add_argument("--no-gym", action="store_true", help="skip gymnasium's sync env")
     args = parser.parse_args()
 
+    cores = os.cpu_count() or 1
     print(
-        f"# {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
-        f"mujoco {mujoco.__version__}, gymnasium {gym.__version__}, N={args.num_envs}"
+        f"# {platform.processor() or platform.machine()}, {cores} CPUs, "
+        f"mujoco {mujoco.__version__}, gymnasium {gym.__version__}"
     )
-    header = ("task", "qdil", "qdil 1 thread", "gym sync", "raw mj_step", "qdil/gym", "qdil/raw")
+    header = ["task", "N", "qdil", "qdil 1 thread", "envpool", "envpool 1 thread"]
+    header += ["gym sync", "raw mj_step", "qdil/envpool", "1 thread", "qdil/gym", "qdil/raw"]
     print("| " + " | ".join(header) + " |")
     print("|" + "---|" * len(header))
     rng = np.random.default_rng(0)
     for task_id in args.tasks:
         probe = gym.make_vec(task_id, num_envs=1, vectorization_mode="sync")
         low, high = probe.single_action_space.low, probe.single_action_space.high
-        shape = (args.steps, args.num_envs, low.size)
-        actions = rng.uniform(low, high, size=shape).astype(np.float32)
-        rates = {}
-        n = args.num_envs
-        vector_envs = {
-            "qdil": gym.make_vec(f"qdil/{task_id}", num_envs=n),
-            "qdil1": gym.make_vec(f"qdil/{task_id}", num_envs=n, num_threads=1),
-            "gym": gym.make_vec(task_id, num_envs=n, vectorization_mode="sync"),
-        }
-        for name, env in vector_envs.items():
-            rates[name] = _median_rate(*bench_vector(env, actions), args.reps)
-        rates["raw"] = _median_rate(
-            *bench_raw(task_id, actions[: max(1, args.steps // 8)]), args.reps
-        )
-        row = (
-            task_id,
-            f"{rates['qdil']:,.0f}",
-            f"{rates['qdil1']:,.0f}",
-            f"{rates['gym']:,.0f}",
-            f"{rates['raw']:,.0f}",
-            f"{rates['qdil'] / rates['gym']:.2f}x",
-            f"{rates['qdil'] / rates['raw']:.2f}x",
-        )
-        print("| " + " | ".join(row) + " |", flush=True)
+        for n in args.num_envs:
+            actions = rng.uniform(low, high, size=(args.steps, n, low.size)).astype(np.float32)
+            contestants = {
+                "qdil": bench_vector(gym.make_vec(f"qdil/{task_id}", num_envs=n), actions),
+                "qdil1": bench_vector(
+                    gym.make_vec(f"qdil/{task_id}", num_envs=n, num_threads=1), actions
+                ),
+            }
+            for name, threads in (("envpool", cores), ("envpool1", 1)):
+                pool = make_envpool(task_id, n, threads)
+                if pool is not None:
+                    contestants[name] = bench_envpool(pool, actions)
+            if not args.no_gym:
+                gym_env = gym.make_vec(task_id, num_envs=n, vectorization_mode="sync")
+                contestants["gym"] = bench_vector(gym_env, actions)
+            contestants["raw"] = bench_raw(task_id, actions[: max(1, args.steps // 8)])
+            rates = _median_rates(contestants, args.reps)
+            print("| " + " | ".join(_row(task_id, n, rates)) + " |", flush=True)
+
+
+def _row(task_id: str, n: int, rates: dict[str, float]) -> list[str]:
+    def rate(name: str) -> str:
+        return f"{rates[name]:,.0f}" if name in rates else "not installed"
+
+    def ratio(a: str, b: str) -> str:
+        return f"{rates[a] / rates[b]:.2f}x" if a in rates and b in rates else "-"
+
+    names = ("qdil", "qdil1", "envpool", "envpool1", "gym", "raw")
+    cells = [task_id, str(n), *map(rate, names)]
+    cells[6] = cells[6] if "gym" in rates else "skipped"
+    cells += [ratio("qdil", "envpool"), ratio("qdil1", "envpool1")]
+    return [*cells, ratio("qdil", "gym"), ratio("qdil", "raw")]
 
 
 if __name__ == "__main__":
