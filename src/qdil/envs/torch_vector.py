@@ -19,7 +19,7 @@ Two things need the host and are kept off the per-step path:
 
 Rollouts through this face equal those through the numpy face from the same seeds:
 observations, foot contacts and episode ends exactly, rewards to float32 rounding of the
-control cost (``tests/envs/test_torch_vector.py``).
+control cost (``tests/rl/test_collect_device.py``).
 """
 
 from __future__ import annotations
