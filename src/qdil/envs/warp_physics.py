@@ -129,6 +129,8 @@ class WarpBatch:
             self._saved = self.warp.zeros((num_sims, size), dtype=float)
             self._keep = self.warp.zeros(num_sims, dtype=bool)
             self._reset_mask = self.warp.zeros(num_sims, dtype=bool)
+            # later launches go on torch's stream (_on_torch_stream): finish these first
+            self.warp.synchronize_device(self.device)
         self.torch_device = torch.device(self.device)
 
         self._fields = export_bounds(mujoco.MjData(model), exports)
@@ -144,6 +146,18 @@ class WarpBatch:
         self._ctrl = self._tensor("ctrl")
         self._qpos = self._tensor("qpos")
         self._qvel = self._tensor("qvel")
+
+    def _on_torch_stream(self) -> Any:
+        """A context in which Warp launches on torch's current stream of the device.
+
+        Warp and torch share the data zero-copy; on one CUDA stream their kernels run in
+        the order they are launched, so neither reads what the other has not written yet,
+        and no one waits on the host. On the CPU every launch finishes before it returns.
+        """
+        if self.torch_device.type != "cuda":
+            return self.warp.ScopedDevice(self.device)
+        stream = torch.cuda.current_stream(self.torch_device)
+        return self.warp.ScopedStream(self.warp.stream_from_torch(stream))
 
     def _tensor(self, field: str) -> torch.Tensor:
         """(N, size) zero-copy torch view of a Warp ``Data`` field."""
@@ -193,7 +207,7 @@ class WarpBatch:
                 restored after the call (every world is stepped: a mask saves no work).
         """
         mjw, warp = self.mjw, self.warp
-        with warp.ScopedDevice(self.device):
+        with self._on_torch_stream():
             if active is not None:  # remember the worlds that sit out, to restore them after
                 warp.to_torch(self._keep).copy_(~active)
                 mjw.get_state(self.wmodel, self.wdata, self._saved, self._state)
@@ -262,7 +276,7 @@ class WarpBatch:
         """
         mjw, warp = self.mjw, self.warp
         column = mask[:, None]
-        with warp.ScopedDevice(self.device):
+        with self._on_torch_stream():
             warp.to_torch(self._reset_mask).copy_(mask)
             mjw.reset_data(self.wmodel, self.wdata, reset=self._reset_mask)
             # MuJoCo's mj_resetData zeros what only rnePostConstraint computes (forward does
