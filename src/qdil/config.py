@@ -42,8 +42,9 @@ class EnvConfig:
         num_threads: physics threads; ``null`` for every available core.
         backend: physics engine: ``mujoco`` (MuJoCo's C engine on the CPU, bit-identical to
             gymnasium) or ``warp`` (MuJoCo Warp, float32; ``pip install -e ".[warp]"``).
-        device: where the ``warp`` backend steps: ``cpu`` (Warp's CPU device, for tests) or
-            ``cuda`` / ``cuda:N``. Policies, PPO and reward models stay on the CPU.
+        device: where the run computes: ``cpu``, or ``cuda`` / ``cuda:N`` (``warp`` backend
+            only). The physics, policies, VPPO, the reward model (Fabric's accelerator) and
+            the bonus run there; pyribs and xNES stay on the host (docs/guides/gpu.md).
         max_episode_steps: episode horizon (the paper: 1000).
         task_kwargs: gymnasium keyword arguments of the task (e.g. ``ctrl_cost_weight``).
     """

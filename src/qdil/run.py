@@ -12,6 +12,7 @@ from ribs.schedulers import Scheduler
 
 from qdil.config import BonusConfig, DemoConfig, EnvConfig, LoggingConfig, QDConfig, RewardFactory
 from qdil.demos.io import load_demos
+from qdil.devices import fabric_settings, run_device
 from qdil.envs.vector import LocomotionVectorEnv
 from qdil.qd.archives import RunArchives, elite_fields, make_grid
 from qdil.qd.emitter import PPGAEmitter
@@ -66,9 +67,14 @@ def build_run(
     With ``resume``, the reward model's offline pretraining is skipped: the checkpoint
     that :func:`~qdil.qd.checkpoint.load_checkpoint` restores next holds its result.
 
+    ``env.device`` places the run: the physics, policies, VPPO, the reward model (Fabric's
+    accelerator) and the bonus run there; pyribs and xNES stay on the host.
+
     Raises:
-        ValueError: for inconsistent settings, naming the recipe key.
+        ValueError: for inconsistent settings, naming the recipe key (``env.device`` for
+            a device the run cannot use).
     """
+    device = run_device(env.backend, env.device)
     _, vppo_seed, emitter_seed, archive_seed, loop_seed, torch_seed, x0_seed = _seeds(seed, 7)
     torch.manual_seed(torch_seed)
 
@@ -147,13 +153,13 @@ def build_run(
         device=env.device,
         **env.task_kwargs,
     )
-    rl.setup(train_env, eval_env, vppo_seed)
+    rl.setup(train_env, eval_env, vppo_seed, device)
 
     # ---- reward model, driven by Lightning Fabric; the bonus wraps it afterwards
     model = reward(obs_dim, action_dim, k)
     if not isinstance(model, RewardModel):
         raise ValueError(f"reward: {type(model).__name__} is not a qdil RewardModel")
-    fabric = L.Fabric(accelerator="cpu", devices=1)
+    fabric = L.Fabric(**fabric_settings(device))
     optimizers = model.configure_optimizers() if model.learned else None
     if optimizers is None:
         optimizers = []
@@ -161,7 +167,8 @@ def build_run(
         optimizers = [optimizers]
     if optimizers:
         _, *optimizers = fabric.setup(model, *optimizers)
-    model = with_bonus(model, bonus, archives)
+    # the bonus's counts and models without optimisers (which Fabric does not set up) too
+    model = with_bonus(model, bonus, archives).to(device)
     demo_set = None
     if model.needs_demos:
         if demos.path is None:
@@ -171,7 +178,7 @@ def build_run(
     model.setup(demo_set)
     if not resume:  # a resumed run's checkpoint holds the pretrained weights
         model.pretrain(demo_set)
-    expert = demo_set.transitions() if demo_set is not None else None
+    expert = demo_set.transitions().to(device) if demo_set is not None else None
 
     run_dir.mkdir(parents=True, exist_ok=True)
     tracker = Tracker(run_dir, logging, name, config)

@@ -12,6 +12,7 @@ import abc
 import numpy as np
 from typing_extensions import override
 
+from qdil.envs.arrays import namespace
 from qdil.envs.task_base import Arrays, LocomotionTask, check_range
 
 
@@ -43,8 +44,9 @@ class _PlanarWalker(LocomotionTask):
 
     @override
     def observation(self, x: Arrays) -> np.ndarray:
+        xp = namespace(x["qpos"])
         position = x["qpos"][:, 1:] if self.exclude_positions else x["qpos"]
-        return np.concatenate((position, np.clip(x["qvel"], -10, 10)), axis=1)
+        return xp.concatenate((position, xp.clip(x["qvel"], -10, 10)), axis=1)
 
     @abc.abstractmethod
     def is_healthy(self, x: Arrays) -> np.ndarray:
@@ -54,9 +56,10 @@ class _PlanarWalker(LocomotionTask):
     def reward(
         self, velocity: np.ndarray, action: np.ndarray, x: Arrays
     ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        xp = namespace(action)
         forward = self.forward_reward_weight * velocity
         healthy = self.is_healthy(x) * self.healthy_reward
-        ctrl_cost = self.ctrl_cost_weight * np.sum(np.square(action), axis=1)
+        ctrl_cost = self.ctrl_cost_weight * xp.sum(xp.square(action), axis=1)
         reward = forward + healthy - ctrl_cost
         return reward, {
             "reward_forward": forward,
@@ -156,11 +159,12 @@ class Hopper(_PlanarWalker):
     @override
     def is_healthy(self, x: Arrays) -> np.ndarray:
         qpos = x["qpos"]
-        state = np.concatenate((qpos, x["qvel"]), axis=1)[:, 2:]
+        xp = namespace(qpos)
+        state = xp.concatenate((qpos, x["qvel"]), axis=1)[:, 2:]
         (min_s, max_s), (min_z, max_z) = self.healthy_state_range, self.healthy_z_range
         min_angle, max_angle = self.healthy_angle_range
         z, angle = qpos[:, 1], qpos[:, 2]
-        healthy_state = np.all((min_s < state) & (state < max_s), axis=1)
+        healthy_state = xp.all((min_s < state) & (state < max_s), axis=1)
         healthy_z = (min_z < z) & (z < max_z)
         healthy_angle = (min_angle < angle) & (angle < max_angle)
         return healthy_state & healthy_z & healthy_angle
@@ -192,14 +196,15 @@ class HalfCheetah(LocomotionTask):
     @override
     def observation(self, x: Arrays) -> np.ndarray:
         position = x["qpos"][:, 1:] if self.exclude_positions else x["qpos"]
-        return np.concatenate((position, x["qvel"]), axis=1)
+        return namespace(position).concatenate((position, x["qvel"]), axis=1)
 
     @override
     def reward(
         self, velocity: np.ndarray, action: np.ndarray, x: Arrays
     ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        xp = namespace(action)
         forward = self.forward_reward_weight * velocity
-        ctrl_cost = self.ctrl_cost_weight * np.sum(np.square(action), axis=1)
+        ctrl_cost = self.ctrl_cost_weight * xp.sum(xp.square(action), axis=1)
         return forward - ctrl_cost, {"reward_forward": forward, "reward_ctrl": -ctrl_cost}
 
     @override

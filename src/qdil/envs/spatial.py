@@ -11,6 +11,7 @@ import mujoco
 import numpy as np
 from typing_extensions import override
 
+from qdil.envs.arrays import constant, namespace
 from qdil.envs.physics import Export
 from qdil.envs.task_base import Arrays, LocomotionTask, check_range
 
@@ -63,6 +64,7 @@ class Humanoid(LocomotionTask):
     def bind(self, model: mujoco.MjModel, init_qpos: np.ndarray, init_qvel: np.ndarray) -> None:
         super().bind(model, init_qpos, init_qvel)
         self._mass = model.body_mass.copy()
+        self._mass_tensors: dict = {}  # the masses on each torch device the task runs on
 
     @override
     def exports(self, model: mujoco.MjModel) -> dict[str, Export]:
@@ -79,9 +81,10 @@ class Humanoid(LocomotionTask):
     @override
     def position(self, x: Arrays) -> np.ndarray:
         # gymnasium's mass_center(): body masses times body CoM positions
+        xp = namespace(x["xipos"])
         xipos = x["xipos"].reshape(len(x["xipos"]), -1, 3)
-        mass = self._mass[:, None]
-        return (np.sum(mass * xipos, axis=1) / np.sum(mass))[:, 0:2].copy()
+        mass = constant(self._mass, xipos, self._mass_tensors)[:, None]
+        return xp.copy((xp.sum(mass * xipos, axis=1) / xp.sum(mass))[:, 0:2])
 
     @override
     def is_healthy(self, x: Arrays) -> np.ndarray:
@@ -96,18 +99,19 @@ class Humanoid(LocomotionTask):
                 parts.append(x[name])
         if self.include["cfrc_ext"]:
             parts.append(x["cfrc_ext"][:, 6:])
-        return np.concatenate(parts, axis=1)
+        return namespace(x["qvel"]).concatenate(parts, axis=1)
 
     @override
     def reward(
         self, velocity: np.ndarray, action: np.ndarray, x: Arrays
     ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        xp = namespace(x["ctrl"])
         forward = self.forward_reward_weight * velocity[:, 0]
         healthy = self.is_healthy(x) * self.healthy_reward
         # gymnasium takes the control cost from data.ctrl, not from the action
-        ctrl_cost = self.ctrl_cost_weight * np.sum(np.square(x["ctrl"]), axis=1)
-        contact_cost = self.contact_cost_weight * np.sum(np.square(x["cfrc_ext"]), axis=1)
-        contact_cost = np.clip(contact_cost, *self.contact_cost_range)
+        ctrl_cost = self.ctrl_cost_weight * xp.sum(xp.square(x["ctrl"]), axis=1)
+        contact_cost = self.contact_cost_weight * xp.sum(xp.square(x["cfrc_ext"]), axis=1)
+        contact_cost = xp.clip(contact_cost, *self.contact_cost_range)
         reward = forward + healthy - (ctrl_cost + contact_cost)
         return reward, {
             "reward_survive": healthy,
@@ -183,27 +187,30 @@ class Ant(LocomotionTask):
 
     @override
     def is_healthy(self, x: Arrays) -> np.ndarray:
-        state = np.concatenate((x["qpos"], x["qvel"]), axis=1)
+        xp = namespace(x["qpos"])
+        state = xp.concatenate((x["qpos"], x["qvel"]), axis=1)
         min_z, max_z = self.healthy_z_range
         z = x["qpos"][:, 2]
-        return np.isfinite(state).all(axis=1) & (min_z <= z) & (z <= max_z)
+        return xp.all(xp.isfinite(state), axis=1) & (min_z <= z) & (z <= max_z)
 
     @override
     def observation(self, x: Arrays) -> np.ndarray:
+        xp = namespace(x["qpos"])
         parts = [x["qpos"][:, 2:] if self.exclude_positions else x["qpos"], x["qvel"]]
         if self.include_cfrc_ext:
-            parts.append(np.clip(x["cfrc_ext"], *self.contact_force_range)[:, 6:])
-        return np.concatenate(parts, axis=1)
+            parts.append(xp.clip(x["cfrc_ext"], *self.contact_force_range)[:, 6:])
+        return xp.concatenate(parts, axis=1)
 
     @override
     def reward(
         self, velocity: np.ndarray, action: np.ndarray, x: Arrays
     ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        xp = namespace(action)
         forward = velocity[:, 0] * self.forward_reward_weight
         healthy = self.is_healthy(x) * self.healthy_reward
-        ctrl_cost = self.ctrl_cost_weight * np.sum(np.square(action), axis=1)
-        forces = np.clip(x["cfrc_ext"], *self.contact_force_range)
-        contact_cost = self.contact_cost_weight * np.sum(np.square(forces), axis=1)
+        ctrl_cost = self.ctrl_cost_weight * xp.sum(xp.square(action), axis=1)
+        forces = xp.clip(x["cfrc_ext"], *self.contact_force_range)
+        contact_cost = self.contact_cost_weight * xp.sum(xp.square(forces), axis=1)
         reward = forward + healthy - (ctrl_cost + contact_cost)
         return reward, {
             "reward_forward": forward,

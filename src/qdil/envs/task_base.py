@@ -17,6 +17,7 @@ import gymnasium
 import mujoco
 import numpy as np
 
+from qdil.envs.arrays import namespace
 from qdil.envs.physics import Export
 
 _ASSETS = Path(gymnasium.__file__).parent / "envs" / "mujoco" / "assets"
@@ -79,7 +80,7 @@ class LocomotionTask(abc.ABC):
 
     def position(self, x: Arrays) -> np.ndarray:
         """(N,) x position, or (N, 2) xy position, whose finite difference is the velocity."""
-        return x["qpos"][:, 0].copy()
+        return namespace(x["qpos"]).copy(x["qpos"][:, 0])
 
     @abc.abstractmethod
     def observation(self, x: Arrays) -> np.ndarray:
@@ -99,7 +100,7 @@ class LocomotionTask(abc.ABC):
 
     def terminated(self, x: Arrays) -> np.ndarray:
         """(N,) bool: the episode ends because the robot is unhealthy."""
-        return np.zeros(len(x["qpos"]), dtype=bool)
+        return namespace(x["qpos"]).zeros_like(x["qpos"][:, 0], dtype=bool)
 
     def info(self, x: Arrays, velocity: np.ndarray) -> dict[str, np.ndarray]:
         """Per-step diagnostics beside the reward terms."""

@@ -151,12 +151,25 @@ class LocomotionVectorEnv(VectorEnv):
                 )
         self._rngs = [seeding.np_random(s)[0] for s in seeds]
 
-    def _reset_envs(self, ids: np.ndarray) -> None:
-        """Draw initial states for sub-environments ``ids`` and reset their episode stats."""
-        assert self._rngs is not None
+    def seed_generators(self, seed: int | list[int | None] | None) -> None:
+        """Seed the reset-noise generators as :meth:`reset` does (``None`` keeps them)."""
+        self._seed(seed)
+
+    def draw_initial_states(self, ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(n, nq) positions and (n, nv) velocities of the next initial states of ``ids``.
+
+        Each sub-environment's generator advances by one draw, as a reset of it does.
+        """
+        if self._rngs is None:
+            raise RuntimeError("seed the generators (reset or seed_generators) first")
         states = [self.task.reset_noise(self._rngs[i]) for i in ids]
         qpos = np.stack([q for q, _ in states])
         qvel = np.stack([v for _, v in states])
+        return qpos, qvel
+
+    def _reset_envs(self, ids: np.ndarray) -> None:
+        """Draw initial states for sub-environments ``ids`` and reset their episode stats."""
+        qpos, qvel = self.draw_initial_states(ids)
         self.physics.reset(ids, qpos, qvel)
         self._position[ids] = self.task.position(self._arrays())[ids]
         self._elapsed[ids] = 0

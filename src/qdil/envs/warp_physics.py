@@ -5,8 +5,11 @@ same constructor, :attr:`exported` and :attr:`sensordata` arrays, :meth:`view`,
 :meth:`step` and :meth:`reset`, so that :class:`~qdil.envs.vector.LocomotionVectorEnv` and
 everything above it run unchanged on either engine (``env.backend: warp``). All worlds live in
 one ``mujoco_warp.Data`` on the Warp device; :attr:`torch_exported` and
-:attr:`torch_sensordata` are their torch tensors on that device, and the numpy arrays are
-host copies made once per step for gymnasium's API.
+:attr:`torch_sensordata` are their torch tensors on that device. :meth:`step` and
+:meth:`reset` (gymnasium's numpy face) copy them to the host after every call;
+:meth:`step_torch` and :meth:`reset_where` (the torch face,
+:class:`~qdil.envs.torch_vector.TorchVectorEnv`) take torch tensors and neither copy nor
+wait for the device.
 
 What differs from the C engine, and why the results agree only within a tolerance
 (``tests/envs/test_warp_backend.py`` states it):
@@ -87,6 +90,7 @@ class WarpBatch:
         sensordata: (N, nsensordata) float64 host array of sensor values at the current states.
         torch_exported: (N, E) float32 tensor on the device, the same values.
         torch_sensordata: (N, nsensordata) float32 tensor on the device.
+        torch_device: the torch device of the Warp device.
 
     Raises:
         ValueError: if ``num_sims`` is below 1, an export names an unknown field, or the
@@ -125,7 +129,9 @@ class WarpBatch:
             self._saved = self.warp.zeros((num_sims, size), dtype=float)
             self._keep = self.warp.zeros(num_sims, dtype=bool)
             self._reset_mask = self.warp.zeros(num_sims, dtype=bool)
-        self._torch_device = torch.device("cpu" if self.device == "cpu" else self.device)
+            # later launches go on torch's stream (_on_torch_stream): finish these first
+            self.warp.synchronize_device(self.device)
+        self.torch_device = torch.device(self.device)
 
         self._fields = export_bounds(mujoco.MjData(model), exports)
         self._slices = export_slices(self._fields, list(exports))
@@ -133,20 +139,35 @@ class WarpBatch:
             if not hasattr(self.wdata, field):
                 raise ValueError(f"export of {field!r}: MuJoCo Warp's Data has no such field")
         width = sum(stop - start for _, start, stop in self._fields)
-        self.torch_exported = torch.zeros((num_sims, width), device=self._torch_device)
-        self.torch_sensordata = torch.zeros(
-            (num_sims, model.nsensordata), device=self._torch_device
-        )
+        self.torch_exported = torch.zeros((num_sims, width), device=self.torch_device)
+        self.torch_sensordata = torch.zeros((num_sims, model.nsensordata), device=self.torch_device)
         self.exported = np.zeros((num_sims, width))
         self.sensordata = np.zeros((num_sims, model.nsensordata))
         self._ctrl = self._tensor("ctrl")
         self._qpos = self._tensor("qpos")
         self._qvel = self._tensor("qvel")
 
+    def _on_torch_stream(self) -> Any:
+        """A context in which Warp launches on torch's current stream of the device.
+
+        Warp and torch share the data zero-copy; on one CUDA stream their kernels run in
+        the order they are launched, so neither reads what the other has not written yet,
+        and no one waits on the host. On the CPU every launch finishes before it returns.
+        """
+        if self.torch_device.type != "cuda":
+            return self.warp.ScopedDevice(self.device)
+        stream = torch.cuda.current_stream(self.torch_device)
+        return self.warp.ScopedStream(self.warp.stream_from_torch(stream))
+
     def _tensor(self, field: str) -> torch.Tensor:
         """(N, size) zero-copy torch view of a Warp ``Data`` field."""
         tensor = self.warp.to_torch(getattr(self.wdata, field))
         return tensor.reshape(self.num_sims, -1)
+
+    @property
+    def slices(self) -> dict[str, slice]:
+        """The columns of :attr:`exported` (and :attr:`torch_exported`) of each export."""
+        return dict(self._slices)
 
     def view(self, name: str) -> np.ndarray:
         """The (N, length) columns of :attr:`exported` that hold export ``name``."""
@@ -160,42 +181,67 @@ class WarpBatch:
             nstep: number of ``step`` calls (the task's frame skip).
             active: (N,) bool mask of simulations to step; ``None`` for all.
         """
-        mjw, warp = self.mjw, self.warp
         keep = None if active is None or np.all(active) else ~np.asarray(active, dtype=bool)
-        with warp.ScopedDevice(self.device):
-            if keep is not None:  # remember the worlds that sit out, to restore them after
-                warp.to_torch(self._keep).copy_(torch.from_numpy(keep))
+        ctrl_t = torch.as_tensor(ctrl, dtype=torch.float32).to(self.torch_device)
+        mask = None if keep is None else torch.from_numpy(~keep).to(self.torch_device)
+        self.step_torch(ctrl_t, nstep, mask)
+        if keep is None:
+            self.exported[:] = self.torch_exported.cpu().double().numpy()
+            self.sensordata[:] = self.torch_sensordata.cpu().double().numpy()
+        else:
+            rows = np.flatnonzero(~keep)
+            self._copy_rows_to_host(rows)
+
+    def step_torch(
+        self, ctrl: torch.Tensor, nstep: int, active: torch.Tensor | None = None
+    ) -> None:
+        """:meth:`step` on the device: torch inputs, no host copy and no host sync.
+
+        Only :attr:`torch_exported` and :attr:`torch_sensordata` are updated (the host
+        arrays are not).
+
+        Args:
+            ctrl: (N, nu) float32 controls on :attr:`torch_device`.
+            nstep: number of ``step`` calls (the task's frame skip).
+            active: (N,) bool tensor of simulations to step; ``None`` for all. The others are
+                restored after the call (every world is stepped: a mask saves no work).
+        """
+        mjw, warp = self.mjw, self.warp
+        with self._on_torch_stream():
+            if active is not None:  # remember the worlds that sit out, to restore them after
+                warp.to_torch(self._keep).copy_(~active)
                 mjw.get_state(self.wmodel, self.wdata, self._saved, self._state)
-            self._ctrl.copy_(torch.as_tensor(ctrl, dtype=torch.float32))
+            self._ctrl.copy_(ctrl)
             for _ in range(nstep):
                 mjw.step(self.wmodel, self.wdata)
             if self.rne_post_constraint:
                 mjw.rne_postconstraint(self.wmodel, self.wdata)
-            if keep is not None:
+            if active is not None:
                 mjw.set_state(self.wmodel, self.wdata, self._saved, self._state, self._keep)
-            rows = None if keep is None else torch.from_numpy(np.flatnonzero(~keep))
-            rows = None if rows is None else rows.to(self._torch_device)
             # exports read the post-step data (cfrc_ext, ...) before collision overwrites it
-            parts = [self._tensor(f)[:, a:b].clone() for f, a, b in self._fields]
+            exported = torch.cat([self._tensor(f)[:, a:b] for f, a, b in self._fields], dim=1)
             if self.model.nsensordata:
                 mjw.kinematics(self.wmodel, self.wdata)
                 mjw.collision(self.wmodel, self.wdata)
                 mjw.sensor_pos(self.wmodel, self.wdata)
-            self._store(torch.cat(parts, dim=1), self._tensor("sensordata"), rows)
+            self._store_where(active, exported, self._tensor("sensordata"))
 
-    def _store(self, exported: torch.Tensor, sensors: torch.Tensor, rows: torch.Tensor | None):
-        """Write the rows of fresh exports and sensors into the device and host arrays."""
+    def _store_where(
+        self, rows: torch.Tensor | None, exported: torch.Tensor, sensors: torch.Tensor
+    ) -> None:
+        """Write fresh exports and sensors into the device arrays where ``rows`` (N,) holds."""
         if rows is None:
             self.torch_exported.copy_(exported)
             self.torch_sensordata.copy_(sensors)
-            self.exported[:] = exported.cpu().double().numpy()
-            self.sensordata[:] = sensors.cpu().double().numpy()
             return
-        self.torch_exported[rows] = exported[rows]
-        self.torch_sensordata[rows] = sensors[rows]
-        host = rows.cpu().numpy()
-        self.exported[host] = exported[rows].cpu().double().numpy()
-        self.sensordata[host] = sensors[rows].cpu().double().numpy()
+        self.torch_exported.copy_(torch.where(rows[:, None], exported, self.torch_exported))
+        self.torch_sensordata.copy_(torch.where(rows[:, None], sensors, self.torch_sensordata))
+
+    def _copy_rows_to_host(self, rows: np.ndarray) -> None:
+        """Copy rows ``rows`` of the device arrays into the host arrays."""
+        index = torch.from_numpy(rows).to(self.torch_device)
+        self.exported[rows] = self.torch_exported[index].cpu().double().numpy()
+        self.sensordata[rows] = self.torch_sensordata[index].cpu().double().numpy()
 
     def reset(self, ids: np.ndarray, qpos: np.ndarray, qvel: np.ndarray) -> None:
         """Reset simulations ``ids`` to the given states, as gymnasium's ``set_state``.
@@ -208,21 +254,40 @@ class WarpBatch:
         ids = np.asarray(ids, dtype=np.int64)
         if ids.size == 0:
             return
-        mjw, warp = self.mjw, self.warp
         mask = np.zeros(self.num_sims, dtype=bool)
         mask[ids] = True
-        rows = torch.from_numpy(ids).to(self._torch_device)
-        with warp.ScopedDevice(self.device):
-            warp.to_torch(self._reset_mask).copy_(torch.from_numpy(mask))
+        qpos_all = torch.zeros((self.num_sims, self.model.nq), dtype=torch.float64)
+        qvel_all = torch.zeros((self.num_sims, self.model.nv), dtype=torch.float64)
+        qpos_all[ids] = torch.as_tensor(qpos, dtype=torch.float64)
+        qvel_all[ids] = torch.as_tensor(qvel, dtype=torch.float64)
+        device = self.torch_device
+        self.reset_where(
+            torch.from_numpy(mask).to(device), qpos_all.to(device), qvel_all.to(device)
+        )
+        self._copy_rows_to_host(ids)
+
+    def reset_where(self, mask: torch.Tensor, qpos: torch.Tensor, qvel: torch.Tensor) -> None:
+        """Reset the simulations where ``mask`` holds, on the device and without a host sync.
+
+        Args:
+            mask: (N,) bool tensor of the simulations to reset.
+            qpos: (N, nq) positions; only the masked rows are read.
+            qvel: (N, nv) velocities; only the masked rows are read.
+        """
+        mjw, warp = self.mjw, self.warp
+        column = mask[:, None]
+        with self._on_torch_stream():
+            warp.to_torch(self._reset_mask).copy_(mask)
             mjw.reset_data(self.wmodel, self.wdata, reset=self._reset_mask)
             # MuJoCo's mj_resetData zeros what only rnePostConstraint computes (forward does
             # not), so gymnasium's first observation holds cfrc_ext = 0; Warp's reset keeps it
             for field in ("cacc", "cfrc_int", "cfrc_ext"):
-                self._tensor(field)[rows] = 0.0
-            self._qpos[rows] = torch.as_tensor(qpos, dtype=torch.float32).to(self._torch_device)
-            self._qvel[rows] = torch.as_tensor(qvel, dtype=torch.float32).to(self._torch_device)
+                tensor = self._tensor(field)
+                tensor.copy_(torch.where(column, 0.0, tensor))
+            self._qpos.copy_(torch.where(column, qpos.to(torch.float32), self._qpos))
+            self._qvel.copy_(torch.where(column, qvel.to(torch.float32), self._qvel))
             # forward recomputes every world's derived quantities from its own state; the
             # next step recomputes them anyway, so the other worlds' trajectories are intact
             mjw.forward(self.wmodel, self.wdata)
-            parts = [self._tensor(f)[:, a:b] for f, a, b in self._fields]
-            self._store(torch.cat(parts, dim=1), self._tensor("sensordata"), rows)
+            exported = torch.cat([self._tensor(f)[:, a:b] for f, a, b in self._fields], dim=1)
+            self._store_where(mask, exported, self._tensor("sensordata"))

@@ -49,9 +49,9 @@ def stats_from_fields(fields: dict[str, np.ndarray]) -> RunningMeanStd:
 def fields_from_stats(stats: RunningMeanStd, lengths: np.ndarray) -> dict[str, np.ndarray]:
     """Archive fields (P, ...) of P policies: their statistics and episode lengths."""
     return {
-        "obs_mean": stats.mean.numpy().copy(),
-        "obs_var": stats.var.numpy().copy(),
-        "obs_count": stats.count.numpy().copy(),
+        "obs_mean": stats.mean.cpu().numpy().copy(),  # pyribs keeps them on the host
+        "obs_var": stats.var.cpu().numpy().copy(),
+        "obs_count": stats.count.cpu().numpy().copy(),
         "length": np.asarray(lengths, dtype=np.float64),
     }
 

@@ -50,7 +50,7 @@ class ExplorationBonus(BonusWrapper):
             digits = (measures > 0.5).long()
         else:
             digits = (measures * self.cells).long().clamp(0, self.cells - 1)
-        powers = per_measure ** torch.arange(measures.shape[-1])
+        powers = per_measure ** torch.arange(measures.shape[-1], device=measures.device)
         return (digits * powers).sum(-1)
 
     def bonus(self, rollout: Rollout, update: bool) -> torch.Tensor:
@@ -64,7 +64,7 @@ class ExplorationBonus(BonusWrapper):
         cells = self.cell(rollout.contacts)  # (T, N)
         counts = self.counts.expand(rollout.num_steps, -1)  # (T, cells)
         if update:
-            visits = torch.zeros(counts.shape, dtype=torch.float64)
+            visits = torch.zeros(counts.shape, dtype=torch.float64, device=counts.device)
             visits.scatter_add_(1, cells, (rollout.valid > 0).to(torch.float64))
             seen = visits.cumsum(0)
             counts = counts + torch.cat([torch.zeros_like(seen[:1]), seen[:-1]])

@@ -72,9 +72,9 @@ class EBCBonus(BonusWrapper):
     def unoccupied(self, measures: torch.Tensor) -> torch.Tensor:
         """(N,) True where m̄ (N, k) falls in a cell of the archive that holds no elite."""
         archive = self.archive()
-        cells = archive.index_of(measures.double().numpy())
+        cells = archive.index_of(measures.double().cpu().numpy())  # pyribs: host
         occupied = np.isin(cells, archive.data("index"))
-        return torch.from_numpy(~occupied)
+        return torch.from_numpy(~occupied).to(measures.device)
 
     def bonus(self, rollout: Rollout) -> torch.Tensor:
         """(T, N) float32 p + q·1[cell(m̄^n) unoccupied], the same at every step of column n."""

@@ -28,11 +28,19 @@ RewardFn = Callable[[Rollout], torch.Tensor]
 
 
 class ActionMap:
-    """Clip policy actions to [-1, 1] and map them to the task's action bounds."""
+    """Clip policy actions to [-1, 1] and map them to the task's action bounds.
 
-    def __init__(self, low: np.ndarray, high: np.ndarray) -> None:
-        self.low = torch.as_tensor(low, dtype=torch.float32)
-        self.half = torch.as_tensor((high - low) / 2.0, dtype=torch.float32)
+    Args:
+        low: (A,) lower action bounds.
+        high: (A,) upper action bounds.
+        device: where the actions are (the run's device).
+    """
+
+    def __init__(
+        self, low: np.ndarray, high: np.ndarray, device: torch.device | str | None = None
+    ) -> None:
+        self.low = torch.as_tensor(low, dtype=torch.float32, device=device)
+        self.half = torch.as_tensor((high - low) / 2.0, dtype=torch.float32, device=device)
 
     def __call__(self, actions: torch.Tensor) -> torch.Tensor:
         """(..., A) policy actions -> (..., A) executed actions."""
@@ -56,8 +64,8 @@ class PolicyData:
     log_probs: torch.Tensor
 
 
-def _blocks(x: torch.Tensor, num_policies: int) -> torch.Tensor:
-    """(N, ...) -> (P, N/P, ...)."""
+def policy_blocks(x: torch.Tensor, num_policies: int) -> torch.Tensor:
+    """(N, ...) -> (P, N/P, ...): environment slot e belongs to policy e // (N/P)."""
     return x.reshape(num_policies, x.shape[0] // num_policies, *x.shape[1:])
 
 
@@ -169,11 +177,11 @@ class Collector:
         self._starts = torch.from_numpy(done.astype(np.float32))
         rollout = Rollout(**buf, valid=torch.ones(shape))
         num_policies = actor.num_models
-        next_by_policy = _blocks(buf["next_obs"].transpose(0, 1), num_policies).flatten(1, 2)
+        next_by_policy = policy_blocks(buf["next_obs"].transpose(0, 1), num_policies).flatten(1, 2)
         norm_next = stats.normalize(next_by_policy, clip=self.obs_clip)
         norm_next = norm_next.reshape(n, num_steps, obs_dim).transpose(0, 1)
         if update_stats:
-            stats.update(_blocks(buf["obs"].transpose(0, 1), num_policies).flatten(1, 2))
+            stats.update(policy_blocks(buf["obs"].transpose(0, 1), num_policies).flatten(1, 2))
         return rollout, PolicyData(norm_obs, norm_next, policy_actions, buf["log_probs"])
 
     def pop_episode_stats(self) -> tuple[list[float], list[int]]:

@@ -93,7 +93,7 @@ class _StackedMLP(nn.Module):
         """Clip each model's gradient to ``max_norm`` separately; returns (P,) norms."""
         grads = [p.grad for p in self.parameters() if p.grad is not None]
         if not grads:
-            return torch.zeros(self.num_models)
+            return torch.zeros(self.num_models, device=self.weights[0].device)
         norms = torch.sqrt(sum(g.reshape(g.shape[0], -1).square().sum(1) for g in grads))
         scale = (max_norm / (norms + 1e-6)).clamp(max=1.0)
         for g in grads:

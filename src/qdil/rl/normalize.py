@@ -18,6 +18,7 @@ class RunningMeanStd:
         num_policies: P, the number of independent statistics.
         shape: shape of one sample, e.g. ``(obs_dim,)`` or ``()``.
         epsilon: initial count, so that the first batch dominates.
+        device: where the statistics live (the run's device).
 
     Attributes:
         mean: (P, *shape) float64.
@@ -25,10 +26,30 @@ class RunningMeanStd:
         count: (P,) float64.
     """
 
-    def __init__(self, num_policies: int, shape: tuple[int, ...] = (), epsilon: float = 1e-4):
-        self.mean = torch.zeros((num_policies, *shape), dtype=torch.float64)
-        self.var = torch.ones((num_policies, *shape), dtype=torch.float64)
-        self.count = torch.full((num_policies,), epsilon, dtype=torch.float64)
+    def __init__(
+        self,
+        num_policies: int,
+        shape: tuple[int, ...] = (),
+        epsilon: float = 1e-4,
+        device: torch.device | str | None = None,
+    ) -> None:
+        on = {"dtype": torch.float64, "device": device}
+        self.mean = torch.zeros((num_policies, *shape), **on)
+        self.var = torch.ones((num_policies, *shape), **on)
+        self.count = torch.full((num_policies,), epsilon, **on)
+
+    @property
+    def device(self) -> torch.device:
+        """Where the statistics live."""
+        return self.mean.device
+
+    def to(self, device: torch.device | str) -> RunningMeanStd:
+        """These statistics on ``device`` (``self`` if they are there already)."""
+        if self.mean.device == torch.device(device):
+            return self
+        out = RunningMeanStd.__new__(RunningMeanStd)
+        out.mean, out.var, out.count = (x.to(device) for x in (self.mean, self.var, self.count))
+        return out
 
     @property
     def num_policies(self) -> int:

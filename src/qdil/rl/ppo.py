@@ -119,7 +119,7 @@ def ppo_update(
     epochs = 0
     for _ in range(settings.update_epochs):
         epochs += 1
-        order = torch.randperm(batch, generator=generator)
+        order = torch.randperm(batch, generator=generator, device=generator.device)
         for start in range(0, batch - minibatch + 1, minibatch):
             idx = order[start : start + minibatch]
             dist = actor.distribution(obs[:, idx])

@@ -78,7 +78,8 @@ class PolicySampler:
             if deterministic:
                 actions = mean
             else:
-                actions = mean + self.std * torch.randn(mean.shape, generator=generator)
+                noise = torch.randn(mean.shape, generator=generator, device=mean.device)
+                actions = mean + self.std * noise
             logp = None
             if log_probs:
                 logp = (

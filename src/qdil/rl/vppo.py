@@ -43,8 +43,10 @@ import numpy as np
 import torch
 
 from qdil.data import Rollout
+from qdil.envs.torch_vector import TorchVectorEnv, has_torch_face
 from qdil.envs.vector import LocomotionVectorEnv
 from qdil.rl.collect import Collector, Evaluation, PolicyData, evaluate_policies
+from qdil.rl.collect_device import DeviceCollector, evaluate_on_device
 from qdil.rl.networks import VectorizedActor, VectorizedCritic
 from qdil.rl.normalize import RunningMeanStd
 from qdil.rl.ppo import PPOSettings, ppo_update
@@ -158,18 +160,28 @@ class VPPO:
 
     # ------------------------------------------------------------------ setup
     def setup(
-        self, train_env: LocomotionVectorEnv, eval_env: LocomotionVectorEnv, seed: int
+        self,
+        train_env: LocomotionVectorEnv,
+        eval_env: LocomotionVectorEnv,
+        seed: int,
+        device: torch.device | str = "cpu",
     ) -> None:
         """Bind the environments and build the persistent critics.
+
+        Rollouts go through the environments' torch face where their physics has one (the
+        warp backend: no host copy per step), through gymnasium's numpy face otherwise.
 
         Args:
             train_env: ``SAME_STEP`` environment of the PPO phases; its N must be divisible
                 by k+1.
             eval_env: ``DISABLED`` environment of the evaluations.
             seed: seed of the critics' initialisation and the action noise.
+            device: the run's device: policies, critics, statistics, rollout buffers and
+                the noise generator live there; it must be the physics' device.
 
         Raises:
-            ValueError: if N is not divisible by k+1.
+            ValueError: if N is not divisible by k+1, or ``device`` is not the physics'
+                device (naming ``env.device``).
         """
         num_objectives = train_env.num_feet + 1
         if train_env.num_envs % num_objectives:
@@ -177,20 +189,35 @@ class VPPO:
                 f"env.num_envs={train_env.num_envs} must be divisible by k+1={num_objectives} "
                 "(one block of simulations per VPPO copy)"
             )
+        self.device = torch.device(device)
+        for env in (train_env, eval_env):
+            physics_device = getattr(env.physics, "torch_device", torch.device("cpu"))
+            if physics_device.type != self.device.type:
+                raise ValueError(
+                    f"env.device: the physics steps on {physics_device} but the policies "
+                    f"would run on {self.device}; one env.device places both"
+                )
         self.train_env, self.eval_env = train_env, eval_env
-        self.collector = Collector(train_env, self.obs_clip)
+        self.collector: Collector | DeviceCollector = (
+            DeviceCollector(train_env, self.obs_clip)
+            if has_torch_face(train_env)
+            else Collector(train_env, self.obs_clip)
+        )
+        self.eval_face = TorchVectorEnv(eval_env) if has_torch_face(eval_env) else None
         self.obs_dim = train_env.single_observation_space.shape[0]
         self.action_dim = train_env.single_action_space.shape[0]
         self.num_objectives = num_objectives
-        self.generator = torch.Generator().manual_seed(seed)
+        self.generator = torch.Generator(device=self.device).manual_seed(seed)
         self.jacobian_critic = VectorizedCritic(
             num_objectives, self.obs_dim, self.critic_hidden, seed
+        ).to(self.device)
+        self.walk_critic = VectorizedCritic(1, self.obs_dim, self.critic_hidden, seed + 1).to(
+            self.device
         )
-        self.walk_critic = VectorizedCritic(1, self.obs_dim, self.critic_hidden, seed + 1)
         self.jacobian_critic_opt = self._adam(self.jacobian_critic.parameters())
         self.walk_critic_opt = self._adam(self.walk_critic.parameters())
-        self.jacobian_returns = RunningMeanStd(num_objectives)
-        self.walk_returns = RunningMeanStd(1)
+        self.jacobian_returns = RunningMeanStd(num_objectives, device=self.device)
+        self.walk_returns = RunningMeanStd(1, device=self.device)
 
     def _adam(self, params) -> torch.optim.Adam:
         return torch.optim.Adam(params, lr=self.learning_rate, eps=self.adam_eps)
@@ -208,6 +235,7 @@ class VPPO:
 
     def _actor(self, solutions: np.ndarray) -> VectorizedActor:
         actor = VectorizedActor(len(solutions), self.obs_dim, self.action_dim, self.actor_hidden)
+        actor = actor.to(self.device)
         actor.set_solutions(solutions)
         if not self.adaptive_std:
             with torch.no_grad():
@@ -232,7 +260,7 @@ class VPPO:
         """
         k1 = self.num_objectives
         actor = self._actor(np.repeat(theta[None], k1, axis=0))
-        copies_stats = RunningMeanStd.stack([stats] * k1)
+        copies_stats = RunningMeanStd.stack([stats.to(self.device)] * k1)
         actor_opt = self._adam([p for p in actor.parameters() if p.requires_grad])
         self.collector.start(seed)
         block = self.train_env.num_envs // k1
@@ -286,9 +314,9 @@ class VPPO:
             ``solutions[0]`` is the moved θ_μ and ``stats`` its statistics.
         """
         actor = self._actor(theta[None])
-        stats = stats.select([0])
+        stats = stats.to(self.device).select([0])
         actor_opt = self._adam([p for p in actor.parameters() if p.requires_grad])
-        c = torch.as_tensor(coefficients, dtype=torch.float32)
+        c = torch.as_tensor(coefficients, dtype=torch.float32, device=self.device)
         self.collector.start(seed)
         rollouts, diagnostics = [], []
         for _ in range(self.walk_iterations):
@@ -323,7 +351,21 @@ class VPPO:
     ) -> Evaluation:
         """Score P solutions over ``episodes`` episodes each (see :func:`evaluate_policies`)."""
         actor = VectorizedActor(len(solutions), self.obs_dim, self.action_dim, self.actor_hidden)
+        actor = actor.to(self.device)
         actor.set_solutions(solutions)  # exactly the stored policies, log σ included
+        stats = stats.to(self.device)
+        if self.eval_face is not None:
+            return evaluate_on_device(
+                self.eval_face,
+                actor,
+                stats,
+                episodes,
+                seed,
+                reward_fn,
+                deterministic,
+                self.obs_clip,
+                self.generator,
+            )
         return evaluate_policies(
             self.eval_env,
             actor,
@@ -348,8 +390,10 @@ class VPPO:
             actions: (B, action_dim) executed actions, mapped back to the policy's [-1, 1].
         """
         actor = VectorizedActor(1, self.obs_dim, self.action_dim, self.actor_hidden)
+        actor = actor.to(self.device)
         actor.set_solutions(solution[None])
         action_map = self.collector.action_map
+        obs, actions, stats = obs.to(self.device), actions.to(self.device), stats.to(self.device)
         policy_actions = (actions - action_map.low) / action_map.half - 1.0
         with torch.no_grad():
             norm = stats.normalize(obs[None].double(), clip=self.obs_clip).float()

@@ -1,0 +1,253 @@
+"""``TorchVectorEnv``: the torch face of a vector environment whose physics is on a device.
+
+:class:`~qdil.envs.vector.LocomotionVectorEnv` speaks gymnasium's numpy API, which copies
+every step's arrays to the host. On a device backend (``env.backend: warp``), rollouts use
+this face instead: actions go in and observations, rewards, terminations, foot contacts and
+episode statistics come out as torch tensors on the physics' device, computed there by the
+same task formulas (:mod:`qdil.envs.arrays`), with no host copy and no host sync per step.
+
+Two things need the host and are kept off the per-step path:
+
+- **Reset noise** is drawn by each sub-environment's own numpy generator (gymnasium's
+  seeding, the same draws as the numpy face). The next ``reset_depth`` initial states of
+  every sub-environment wait on the device; an episode end takes the next one there, and
+  every ``reset_depth`` steps one host round trip tops the queues up. A sub-environment
+  ends at most one episode per step, so a queue never runs dry.
+- **Autoreset** (``SAME_STEP``) resets the finished worlds in place with
+  ``WarpBatch.reset_where``, which also runs MuJoCo's ``forward`` on the other worlds (it
+  leaves their states as they are): knowing whether any world finished would cost a sync.
+
+Rollouts through this face equal those through the numpy face from the same seeds:
+observations, foot contacts and episode ends exactly, rewards to float32 rounding of the
+control cost (``tests/rl/test_collect_device.py``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from gymnasium.vector import AutoresetMode
+
+from qdil.envs.vector import LocomotionVectorEnv
+
+
+@dataclass(frozen=True)
+class TorchStep:
+    """One env step of N sub-environments, (N, ...) tensors on the physics' device.
+
+    Attributes:
+        obs: float64 observations to act on next (after an autoreset, the new episode's).
+        final_obs: float64 observations of the states the step reached (before a reset).
+        reward: float64 true rewards (0 for sub-environments left out of the step).
+        terminated: bool, the episode ended because the robot is unhealthy.
+        truncated: bool, the episode reached ``max_episode_steps``.
+        contacts: float32 0/1 foot-contact flags of ``obs``'s states.
+        final_contacts: float32 foot-contact flags of ``final_obs``'s states.
+        episode_return: float64 true return of the episodes that ended (0 elsewhere).
+        episode_length: int64 lengths of the episodes that ended (0 elsewhere).
+        episode_measures: (N, k) float64 mean foot contacts of the episodes that ended.
+    """
+
+    obs: torch.Tensor
+    final_obs: torch.Tensor
+    reward: torch.Tensor
+    terminated: torch.Tensor
+    truncated: torch.Tensor
+    contacts: torch.Tensor
+    final_contacts: torch.Tensor
+    episode_return: torch.Tensor
+    episode_length: torch.Tensor
+    episode_measures: torch.Tensor
+
+    @property
+    def done(self) -> torch.Tensor:
+        """(N,) bool, terminated or truncated."""
+        return self.terminated | self.truncated
+
+
+def has_torch_face(env: LocomotionVectorEnv) -> bool:
+    """Whether ``env``'s physics steps from torch tensors on its device (the warp backend)."""
+    return hasattr(env.physics, "step_torch")
+
+
+class TorchVectorEnv:
+    """Steps a :class:`LocomotionVectorEnv` from and into torch tensors on its device.
+
+    The wrapped environment's numpy face must not be stepped meanwhile: the two faces keep
+    their own episode statistics.
+
+    Args:
+        env: an environment on a device backend, ``autoreset_mode`` ``SAME_STEP`` (training)
+            or ``DISABLED`` (evaluation).
+        reset_depth: initial states queued per sub-environment (``SAME_STEP``); the queues
+            are topped up from the host every ``reset_depth`` steps.
+
+    Raises:
+        ValueError: for a backend without a torch face, naming ``env.backend``, or the
+            ``NEXT_STEP`` autoreset mode.
+    """
+
+    def __init__(self, env: LocomotionVectorEnv, reset_depth: int = 16) -> None:
+        if not has_torch_face(env):
+            raise ValueError(
+                f"env.backend: {env.backend} hands numpy arrays to the host; the torch face "
+                "needs a device backend (env.backend: warp)"
+            )
+        if env.autoreset_mode is AutoresetMode.NEXT_STEP:
+            raise ValueError("the torch face supports autoreset_mode SAME_STEP and DISABLED")
+        if reset_depth < 1:
+            raise ValueError(f"reset_depth must be at least 1, got {reset_depth}")
+        self.env, self.task, self.physics = env, env.task, env.physics
+        self.device: torch.device = env.physics.torch_device
+        self.num_envs = n = env.num_envs
+        self.num_feet = k = env.num_feet
+        self.autoreset = env.autoreset_mode is AutoresetMode.SAME_STEP
+        self.reset_depth = reset_depth
+        self._slices = env.physics.slices
+        on = {"device": self.device}
+        self._position = self.task.position(self._arrays())
+        self._elapsed = torch.zeros(n, dtype=torch.int64, **on)
+        self._return = torch.zeros(n, dtype=torch.float64, **on)
+        self._contact_sum = torch.zeros((n, k), dtype=torch.float64, **on)
+        self._obs = self.task.observation(self._arrays())
+        self._rows = torch.arange(n, **on)
+        model = env.model
+        self._queue_qpos = torch.zeros((n, reset_depth, model.nq), dtype=torch.float64, **on)
+        self._queue_qvel = torch.zeros((n, reset_depth, model.nv), dtype=torch.float64, **on)
+        self._used = torch.zeros(n, dtype=torch.int64, **on)  # states taken, per sim
+        self._drawn = np.zeros(n, dtype=np.int64)  # states queued so far, per sim
+        self._since_top_up = 0
+
+    # ----------------------------------------------------------------- helpers
+    def _arrays(self) -> dict[str, torch.Tensor]:
+        """The exported arrays as float64 device tensors (the numpy face's float64 values)."""
+        exported = self.physics.torch_exported.double()
+        return {name: exported[:, cols] for name, cols in self._slices.items()}
+
+    def _contacts(self) -> torch.Tensor:
+        return (self.physics.torch_sensordata > 0).to(torch.float32)
+
+    def _top_up(self) -> None:
+        """Queue new initial states for the ones taken since the last top-up (one sync)."""
+        used = self._used.cpu().numpy()
+        missing = used + self.reset_depth - self._drawn
+        ids = np.repeat(np.arange(self.num_envs), missing)
+        if ids.size:
+            # state number drawn, drawn + 1, ... of each sim, in its generator's order
+            first = np.repeat(np.cumsum(missing) - missing, missing)
+            slots = np.repeat(self._drawn, missing) + np.arange(ids.size) - first
+            qpos, qvel = self.env.draw_initial_states(ids)
+            rows = torch.from_numpy(ids).to(self.device)
+            slots_t = torch.from_numpy(slots % self.reset_depth).to(self.device)
+            self._queue_qpos[rows, slots_t] = torch.from_numpy(qpos).to(self.device)
+            self._queue_qvel[rows, slots_t] = torch.from_numpy(qvel).to(self.device)
+        self._drawn = used + self.reset_depth
+        self._since_top_up = 0
+
+    def _start_episodes(self, mask: torch.Tensor) -> None:
+        """Zero the episode statistics where ``mask`` (N,) holds, after a physics reset."""
+        position = self.task.position(self._arrays())
+        wide = mask if position.dim() == 1 else mask[:, None]
+        self._position = torch.where(wide, position, self._position)
+        self._elapsed = torch.where(mask, 0, self._elapsed)
+        self._return = torch.where(mask, 0.0, self._return)
+        self._contact_sum = torch.where(mask[:, None], 0.0, self._contact_sum)
+
+    # --------------------------------------------------------------------- API
+    def reset(
+        self, seed: int | list[int | None] | None = None, mask: np.ndarray | None = None
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """Reset every sub-environment, or those in ``mask``, as the numpy face's ``reset``.
+
+        Args:
+            seed: reset seed (gymnasium's rule: sub-environment i gets ``seed + i``).
+            mask: (N,) bool numpy array of the sub-environments to reset; ``None`` for all.
+
+        Returns:
+            (N, obs_dim) float64 observations and (N, k) float32 foot contacts.
+        """
+        self.env.seed_generators(seed)
+        mask = np.ones(self.num_envs, dtype=bool) if mask is None else np.asarray(mask, bool)
+        ids = np.flatnonzero(mask)
+        qpos, qvel = self.env.draw_initial_states(ids)
+        self.physics.reset(ids, qpos, qvel)
+        mask_t = torch.from_numpy(mask).to(self.device)
+        self._start_episodes(mask_t)
+        self._obs = torch.where(mask_t[:, None], self.task.observation(self._arrays()), self._obs)
+        if self.autoreset:
+            self._used.zero_()
+            self._drawn[:] = 0
+            self._top_up()
+        return self._obs, self._contacts()
+
+    def step(self, actions: torch.Tensor, mask: torch.Tensor | None = None) -> TorchStep:
+        """Advance the sub-environments by one env step, on the device.
+
+        Args:
+            actions: (N, action_dim) float32 actions on the device (unchecked: a check for
+                NaN would cost a sync).
+            mask: (N,) bool tensor of the sub-environments to advance (``DISABLED`` only);
+                the others keep their state and report reward 0 and no episode end. Leave
+                finished episodes out: unlike the numpy face, nothing stops them (a check
+                would cost a sync).
+
+        Returns:
+            The step's tensors.
+        """
+        if mask is not None and self.autoreset:
+            raise ValueError("step(mask=...) needs autoreset_mode=DISABLED")
+        if self.autoreset and self._since_top_up == self.reset_depth:
+            self._top_up()
+        self._since_top_up += 1
+        stepping = torch.ones(self.num_envs, dtype=torch.bool, device=self.device)
+        if mask is not None:
+            stepping = mask
+        task = self.task
+        self.physics.step_torch(actions, task.frame_skip, mask)
+        x = self._arrays()
+
+        position = task.position(x)
+        velocity = (position - self._position) / task.dt
+        wide = stepping if position.dim() == 1 else stepping[:, None]
+        self._position = torch.where(wide, position, self._position)
+        reward, _ = task.reward(velocity, actions, x)
+        reward = torch.where(stepping, reward.to(torch.float64), 0.0)
+        terminated = task.terminated(x) & stepping
+        self._elapsed = self._elapsed + stepping
+        truncated = torch.zeros_like(terminated)
+        if self.env.max_episode_steps is not None:
+            truncated = (self._elapsed >= self.env.max_episode_steps) & stepping
+        contacts = self._contacts()
+        obs = task.observation(x)
+        self._return = self._return + reward
+        self._contact_sum = self._contact_sum + torch.where(stepping[:, None], contacts, 0.0)
+        done = terminated | truncated
+        length = self._elapsed.clamp(min=1)
+        episode_return = torch.where(done, self._return, 0.0)
+        episode_length = torch.where(done, self._elapsed, 0)
+        measures = torch.where(done[:, None], self._contact_sum / length[:, None], 0.0)
+        final_obs, final_contacts = obs, contacts
+        if self.autoreset:  # the finished worlds take their next queued initial state
+            slot = self._used % self.reset_depth
+            self.physics.reset_where(
+                done, self._queue_qpos[self._rows, slot], self._queue_qvel[self._rows, slot]
+            )
+            self._used = self._used + done
+            self._start_episodes(done)
+            obs = torch.where(done[:, None], task.observation(self._arrays()), obs)
+            contacts = torch.where(done[:, None], self._contacts(), contacts)
+        self._obs = obs
+        return TorchStep(
+            obs=obs,
+            final_obs=final_obs,
+            reward=reward,
+            terminated=terminated,
+            truncated=truncated,
+            contacts=contacts,
+            final_contacts=final_contacts,
+            episode_return=episode_return,
+            episode_length=episode_length,
+            episode_measures=measures,
+        )

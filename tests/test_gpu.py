@@ -1,0 +1,81 @@
+"""The CUDA path: a short fit on the GPU, placement, and no per-step host sync.
+
+Skipped without CUDA. On a machine with an NVIDIA GPU, a CUDA build of torch and the warp
+extra, one command runs them (docs/guides/gpu.md):
+
+    pytest -m gpu -n 0 tests/test_gpu.py tests/rl/test_collect_device.py
+
+None of these has run yet: the project's machines have had no GPU.
+"""
+
+from __future__ import annotations
+
+import csv
+import warnings
+from pathlib import Path
+
+import pytest
+import torch
+from run_devices import build, off_device
+
+pytestmark = [
+    pytest.mark.gpu,
+    pytest.mark.skipif(
+        not torch.cuda.is_available(), reason="needs a CUDA GPU and a CUDA build of torch"
+    ),
+]
+pytest.importorskip("mujoco_warp", reason="the warp extra is not installed")
+
+from qdil.cli import main  # noqa: E402
+from qdil.rl.collect_device import DeviceCollector  # noqa: E402
+from qdil.rl.normalize import RunningMeanStd  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+SMOKE = ROOT / "recipes" / "smoke" / "walker_true.yaml"
+IL = ROOT / "recipes" / "smoke" / "walker_il.yaml"
+ON_GPU = ("--env.backend", "warp", "--env.device", "cuda")
+
+
+def test_a_short_fit_runs_on_cuda(tmp_path: Path, monkeypatch) -> None:
+    monkeypatch.chdir(tmp_path)
+    main(["fit", str(SMOKE), *ON_GPU, "--name", "gpu"])
+    with open(tmp_path / "runs" / "gpu" / "metrics.csv", newline="") as file:
+        rows = list(csv.DictReader(file))
+    assert [row["iteration"] for row in rows] == ["1", "2", "3"]
+    assert float(rows[-1]["qd/num_elites"]) >= 1
+
+
+def test_every_tensor_of_a_run_is_on_the_gpu(tmp_path: Path, walker_demos) -> None:
+    run = build(
+        IL,
+        tmp_path / "run",
+        *ON_GPU,
+        "--demos.path",
+        str(walker_demos),
+        "--bonus.enabled",
+        "true",
+    )
+    assert off_device(run, torch.device("cuda")) == []
+    assert run.fabric.device.type == "cuda"
+    assert run.env.physics.torch_exported.device.type == "cuda"
+    assert isinstance(run.vppo.collector, DeviceCollector)
+
+
+def test_a_rollout_does_not_sync_with_the_host_per_step(tmp_path: Path) -> None:
+    run = build(SMOKE, tmp_path / "run", *ON_GPU)
+    vppo, collector = run.vppo, run.vppo.collector
+    actor = vppo._actor(vppo.initial_solution(0)[None].repeat(vppo.num_objectives, 0))
+    stats = RunningMeanStd(vppo.num_objectives, (vppo.obs_dim,), device="cuda")
+    collector.start(seed=0)
+    steps, depth = 64, collector.torch_env.reset_depth
+    torch.cuda.synchronize()
+    torch.cuda.set_sync_debug_mode("warn")  # torch warns at every synchronising call
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            collector.collect(actor, stats, steps, vppo.generator, update_stats=True)
+    finally:
+        torch.cuda.set_sync_debug_mode("default")
+    syncs = [w for w in caught if "synchroniz" in str(w.message)]
+    # the reset-noise queues are topped up every `depth` steps; nothing else syncs
+    assert len(syncs) <= steps // depth, [str(w.message) for w in syncs]
