@@ -22,16 +22,13 @@ from __future__ import annotations
 import csv
 import json
 import shutil
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 from ribs.archives import GridArchive
 
 from qdil.evaluation.rescore import EVAL_JSON
-
-if TYPE_CHECKING:
-    from qdil.evaluation.runs import RunResult
 
 RECORD_JSON = "record.json"
 ARCHIVE_CSV = "archive.csv"
@@ -39,55 +36,75 @@ RECORD_FORMAT = 1
 COPIED = ("config.yaml", "metrics.csv", EVAL_JSON)
 
 
+@dataclass
+class Record:
+    """What a report keeps of one run besides its config and curves.
+
+    Attributes:
+        iteration: the iteration of the final archive.
+        source: where the final metrics came from (corrected or training archive).
+        metrics: final metrics, keys of :func:`qdil.qd.archives.qd_metrics`.
+        archive: the final archive (only objectives and measures are kept).
+        notes: remarks the report made on the run.
+    """
+
+    iteration: int | None
+    source: str
+    metrics: dict[str, float]
+    archive: GridArchive
+    notes: list[str] = field(default_factory=list)
+
+
+class RecordError(ValueError):
+    """A record's files are missing or unreadable."""
+
+
 def is_record(path: Path) -> bool:
     """Whether a run directory is a record (``record.json`` and no checkpoint)."""
     return (path / RECORD_JSON).is_file() and not (path / "checkpoints").is_dir()
 
 
-def write_record(run: RunResult, dest: Path) -> Path:
-    """Write the record of an included run into ``dest`` (replaced if it exists).
+def write_record(run_dir: Path, record: Record, dest: Path) -> Path:
+    """Write the record of a run into ``dest`` (replaced if it exists).
 
     Args:
-        run: an included run, as :func:`qdil.evaluation.runs.load_run` read it.
+        run_dir: the run directory (or a record kept by another report, copied as it is).
+        record: the run's final numbers and archive, as the report read them.
         dest: the record's folder.
 
     Returns:
         ``dest``.
-
-    Raises:
-        ValueError: the run is left out of the report (it has no final archive).
     """
-    if not run.included or run.archive is None:
-        raise ValueError(f"{run.path} is left out of the report; it has no record to keep")
-    if dest.resolve() == run.path.resolve():
+    if dest.resolve() == run_dir.resolve():
         return dest  # the run is this record already
     tmp = dest.with_name(dest.name + ".tmp")
     shutil.rmtree(tmp, ignore_errors=True)
-    if is_record(run.path):  # a record kept by another report: copied as it is
-        shutil.copytree(run.path, tmp)
+    if is_record(run_dir):  # a record kept by another report: copied as it is
+        shutil.copytree(run_dir, tmp)
         return _swap(tmp, dest)
     tmp.mkdir(parents=True)
     for name in COPIED:
-        if (run.path / name).is_file():
-            shutil.copy2(run.path / name, tmp / name)
+        if (run_dir / name).is_file():
+            shutil.copy2(run_dir / name, tmp / name)
+    archive = record.archive
     summary = {
         "format": RECORD_FORMAT,
-        "origin": str(run.path),
-        "iteration": run.iteration,
-        "source": run.source,
-        "metrics": run.metrics,
-        "notes": [note for note in run.notes if not note.startswith("seed ")],
-        "dims": [int(d) for d in run.archive.dims],
+        "origin": str(run_dir),
+        "iteration": record.iteration,
+        "source": record.source,
+        "metrics": record.metrics,
+        "notes": [note for note in record.notes if not note.startswith("seed ")],
+        "dims": [int(d) for d in archive.dims],
         "ranges": [
             [float(lo), float(hi)]
-            for lo, hi in zip(run.archive.lower_bounds, run.archive.upper_bounds, strict=True)
+            for lo, hi in zip(archive.lower_bounds, archive.upper_bounds, strict=True)
         ],
     }
     (tmp / RECORD_JSON).write_text(json.dumps(summary, indent=1) + "\n")
-    data = run.archive.data(["index", "objective", "measures"])
+    data = archive.data(["index", "objective", "measures"])
     with open(tmp / ARCHIVE_CSV, "w", newline="") as file:
         writer = csv.writer(file)
-        k = data["measures"].shape[1] if len(data["objective"]) else len(run.archive.dims)
+        k = len(archive.dims)
         writer.writerow(["index", "objective", *[f"measures_{j}" for j in range(k)]])
         for index, objective, measures in zip(
             data["index"], data["objective"], data["measures"], strict=True
@@ -104,27 +121,30 @@ def _swap(tmp: Path, dest: Path) -> Path:
     return dest
 
 
-def read_record(run: RunResult) -> None:
-    """Fill ``run``'s iteration, final metrics, source and archive from its record.
+def read_record(path: Path) -> Record:
+    """Read the record kept in ``path``.
 
     Args:
-        run: a run whose directory :func:`is_record`; problems are added to it when the
-            record cannot be read.
+        path: a folder for which :func:`is_record` holds.
+
+    Returns:
+        The record; its source says which run it was kept from.
+
+    Raises:
+        RecordError: a file is missing or unreadable.
     """
     try:
-        summary = json.loads((run.path / RECORD_JSON).read_text())
-        run.iteration = summary["iteration"]
-        run.metrics = {key: float(value) for key, value in summary["metrics"].items()}
+        summary = json.loads((path / RECORD_JSON).read_text())
+        metrics = {key: float(value) for key, value in summary["metrics"].items()}
         dims, ranges = summary["dims"], summary["ranges"]
-        with open(run.path / ARCHIVE_CSV, newline="") as file:
+        with open(path / ARCHIVE_CSV, newline="") as file:
             rows = list(csv.reader(file))[1:]
+        values = np.array(rows, dtype=np.float64).reshape(len(rows), 2 + len(dims))
     except (OSError, ValueError, KeyError, TypeError) as error:
-        run.problems.append(f"record unreadable ({error!r}); write it again with qdil report")
-        return
+        message = f"record unreadable ({error!r}); write it again with qdil report"
+        raise RecordError(message) from error
     archive = GridArchive(solution_dim=1, dims=dims, ranges=[tuple(r) for r in ranges])
-    if rows:
-        values = np.array(rows, dtype=np.float64)
+    if len(values):
         archive.add(np.zeros((len(values), 1)), values[:, 1], values[:, 2:])
-    run.archive = archive
-    run.source = f"{summary.get('source', '?')}; from the record of {summary.get('origin', '?')}"
-    run.notes.extend(summary.get("notes", []))
+    source = f"{summary.get('source', '?')}; from the record of {summary.get('origin', '?')}"
+    return Record(summary.get("iteration"), source, metrics, archive, summary.get("notes", []))

@@ -48,7 +48,7 @@ from qdil.evaluation.figures import (
     plot_heatmaps,
 )
 from qdil.evaluation.page import Report, build_document
-from qdil.evaluation.records import write_record
+from qdil.evaluation.records import Record, write_record
 from qdil.evaluation.runs import (
     RunResult,
     collect_runs,
@@ -149,7 +149,9 @@ def keep_records(runs: Iterable[RunResult], folder: Path) -> list[str]:
             n += 1
             name = f"{run.path.name}-{n}"
         names.add(name)
-        write_record(run, folder / name)
+        assert run.archive is not None  # every included run has its final archive
+        record = Record(run.iteration, run.source, run.metrics, run.archive, run.notes)
+        write_record(run.path, record, folder / name)
         written.append(f"{folder.name}/{name}")
     return written
 

@@ -36,7 +36,7 @@ import numpy as np
 import yaml
 from ribs.archives import GridArchive
 
-from qdil.evaluation.records import is_record, read_record
+from qdil.evaluation.records import RecordError, is_record, read_record
 from qdil.evaluation.rescore import CORRECTED, EVAL_JSON
 from qdil.qd.archives import QD_OFFSETS, qd_metrics
 from qdil.qd.checkpoint import CheckpointError, load_archive
@@ -243,7 +243,14 @@ def light_copy(archive: GridArchive) -> GridArchive:
 def _final_archive(run: RunResult) -> None:
     """Fill ``run``'s final archive, metrics and source (corrected archive preferred)."""
     if is_record(run.path):
-        read_record(run)
+        try:
+            record = read_record(run.path)
+        except RecordError as error:
+            run.problems.append(str(error))
+            return
+        run.iteration, run.source, run.metrics = record.iteration, record.source, record.metrics
+        run.archive = record.archive
+        run.notes.extend(record.notes)
         return
     try:
         archive, run.iteration = load_archive(run.path, "true")
