@@ -30,7 +30,7 @@ import torch
 from qdil.data import Rollout, TransitionBatch
 from qdil.qd.archives import QD_OFFSETS, qd_metrics
 from qdil.qd.checkpoint import save_checkpoint
-from qdil.rl.collect import Evaluation
+from qdil.rl.episodes import Evaluation
 from qdil.rl.normalize import RunningMeanStd
 
 if TYPE_CHECKING:

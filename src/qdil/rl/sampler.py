@@ -56,6 +56,7 @@ class PolicySampler:
         generator: torch.Generator | None,
         deterministic: bool = False,
         log_probs: bool = True,
+        noise: torch.Tensor | None = None,
     ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]:
         """Sample actions for N observations, N/P consecutive ones per policy.
 
@@ -64,6 +65,8 @@ class PolicySampler:
             generator: random source of the Gaussian noise.
             deterministic: take the mean action (draws no noise).
             log_probs: compute the log-likelihoods (``None`` in their place otherwise).
+            noise: (N, A) standard normal noise drawn elsewhere (a remote worker replays
+                the head's stream); ``generator`` is then not used.
 
         Returns:
             ``(norm_obs, actions, log_probs)``: (N, obs_dim), (N, A) unclipped, (N,).
@@ -78,7 +81,9 @@ class PolicySampler:
             if deterministic:
                 actions = mean
             else:
-                actions = mean + self.std * torch.randn(mean.shape, generator=generator)
+                if noise is None:
+                    noise = torch.randn(mean.shape, generator=generator)
+                actions = mean + self.std * noise.reshape(mean.shape)
             logp = None
             if log_probs:
                 logp = (

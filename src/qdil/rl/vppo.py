@@ -44,7 +44,8 @@ import torch
 
 from qdil.data import Rollout
 from qdil.envs.vector import LocomotionVectorEnv
-from qdil.rl.collect import Collector, Evaluation, PolicyData, evaluate_policies
+from qdil.rl.collect import Collector, PolicyData
+from qdil.rl.episodes import Evaluation, evaluate_policies
 from qdil.rl.networks import VectorizedActor, VectorizedCritic
 from qdil.rl.normalize import RunningMeanStd
 from qdil.rl.ppo import PPOSettings, ppo_update
