@@ -44,8 +44,9 @@ import torch
 
 from qdil.data import Rollout
 from qdil.envs.vector import LocomotionVectorEnv
-from qdil.rl.collect import Collector, PolicyData
-from qdil.rl.episodes import Evaluation, evaluate_policies
+from qdil.rl.collect import ActionMap, PolicyData
+from qdil.rl.episodes import Evaluation
+from qdil.rl.execution import Executor, LocalExecutor
 from qdil.rl.networks import VectorizedActor, VectorizedCritic
 from qdil.rl.normalize import RunningMeanStd
 from qdil.rl.ppo import PPOSettings, ppo_update
@@ -159,7 +160,11 @@ class VPPO:
 
     # ------------------------------------------------------------------ setup
     def setup(
-        self, train_env: LocomotionVectorEnv, eval_env: LocomotionVectorEnv, seed: int
+        self,
+        train_env: LocomotionVectorEnv,
+        eval_env: LocomotionVectorEnv,
+        seed: int,
+        executor: Executor | None = None,
     ) -> None:
         """Bind the environments and build the persistent critics.
 
@@ -168,6 +173,7 @@ class VPPO:
                 by k+1.
             eval_env: ``DISABLED`` environment of the evaluations.
             seed: seed of the critics' initialisation and the action noise.
+            executor: who steps the simulations (default: :class:`LocalExecutor`, here).
 
         Raises:
             ValueError: if N is not divisible by k+1.
@@ -179,7 +185,13 @@ class VPPO:
                 "(one block of simulations per VPPO copy)"
             )
         self.train_env, self.eval_env = train_env, eval_env
-        self.collector = Collector(train_env, self.obs_clip)
+        if train_env.autoreset_mode.value != "SameStep":
+            raise ValueError("the training environment must use autoreset_mode=SAME_STEP")
+        self.executor = LocalExecutor() if executor is None else executor
+        self.executor.setup(train_env, eval_env, self.obs_clip)
+        self.action_map = ActionMap(
+            train_env.single_action_space.low, train_env.single_action_space.high
+        )
         self.obs_dim = train_env.single_observation_space.shape[0]
         self.action_dim = train_env.single_action_space.shape[0]
         self.num_objectives = num_objectives
@@ -235,11 +247,11 @@ class VPPO:
         actor = self._actor(np.repeat(theta[None], k1, axis=0))
         copies_stats = RunningMeanStd.stack([stats] * k1)
         actor_opt = self._adam([p for p in actor.parameters() if p.requires_grad])
-        self.collector.start(seed)
+        self.executor.start(seed)
         block = self.train_env.num_envs // k1
         rollouts, diagnostics = [], []
         for _ in range(self.jacobian_iterations):
-            rollout, pdata = self.collector.collect(
+            rollout, pdata = self.executor.collect(
                 actor, copies_stats, self.rollout_length, self.generator, update_stats=False
             )
             # copy 0: the reward of f; copy j: the measure proxy δ_j after the step
@@ -290,10 +302,10 @@ class VPPO:
         stats = stats.select([0])
         actor_opt = self._adam([p for p in actor.parameters() if p.requires_grad])
         c = torch.as_tensor(coefficients, dtype=torch.float32)
-        self.collector.start(seed)
+        self.executor.start(seed)
         rollouts, diagnostics = [], []
         for _ in range(self.walk_iterations):
-            rollout, pdata = self.collector.collect(
+            rollout, pdata = self.executor.collect(
                 actor, stats, self.rollout_length, self.generator, update_stats=True
             )
             rewards = c[0] * reward_fn(rollout) + (rollout.next_contacts * c[1:]).sum(-1)
@@ -322,19 +334,11 @@ class VPPO:
         reward_fn: RewardFn | None = None,
         deterministic: bool = False,
     ) -> Evaluation:
-        """Score P solutions over ``episodes`` episodes each (see :func:`evaluate_policies`)."""
+        """Score P solutions over ``episodes`` episodes each (see ``evaluate_policies``)."""
         actor = VectorizedActor(len(solutions), self.obs_dim, self.action_dim, self.actor_hidden)
         actor.set_solutions(solutions)  # exactly the stored policies, log σ included
-        return evaluate_policies(
-            self.eval_env,
-            actor,
-            stats,
-            episodes,
-            seed,
-            reward_fn,
-            deterministic,
-            self.obs_clip,
-            self.generator,
+        return self.executor.evaluate(
+            actor, stats, episodes, seed, reward_fn, deterministic, self.generator
         )
 
     def log_probs(
@@ -350,7 +354,7 @@ class VPPO:
         """
         actor = VectorizedActor(1, self.obs_dim, self.action_dim, self.actor_hidden)
         actor.set_solutions(solution[None])
-        action_map = self.collector.action_map
+        action_map = self.action_map
         policy_actions = (actions - action_map.low) / action_map.half - 1.0
         with torch.no_grad():
             norm = stats.normalize(obs[None].double(), clip=self.obs_clip).float()
