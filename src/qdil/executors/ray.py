@@ -14,6 +14,8 @@ last checkpoint, with Ray or locally. The head sends each call once to Ray's obj
 from __future__ import annotations
 
 import importlib
+import os
+import socket
 from typing import Any
 
 from qdil.executors.sharded import ShardedExecutor
@@ -21,6 +23,7 @@ from qdil.executors.worker import ShardWorker
 from qdil.rl.execution import ExecutorError
 
 INSTALL_HINT = "the Ray executor needs Ray: pip install 'qdil[ray]'"
+CONNECT_TIMEOUT_S = 5.0
 
 
 def import_ray() -> Any:
@@ -61,6 +64,7 @@ class RayExecutor(ShardedExecutor):
     def _launch(self, factory: Any, bounds: list[tuple[int, int]]) -> None:
         ray = import_ray()
         if not ray.is_initialized():
+            _check_reachable(self.address)
             try:
                 ray.init(address=self.address, log_to_driver=True)
             except (ConnectionError, TimeoutError) as error:
@@ -101,14 +105,33 @@ class RayExecutor(ShardedExecutor):
         self.workers = []
 
 
+def _check_reachable(address: str | None) -> None:
+    """Refuse an address whose port does not answer (``ray.init`` would wait for minutes).
+
+    Raises:
+        ExecutorError: naming the address.
+    """
+    if address in (None, "auto", "local"):
+        return  # ray.init finds (or starts) the local cluster, or says it cannot
+    host, _, port = address.removeprefix("ray://").rpartition(":")
+    try:
+        with socket.create_connection((host, int(port)), timeout=CONNECT_TIMEOUT_S):
+            pass
+    except (OSError, ValueError) as error:
+        raise ExecutorError(
+            f"cannot reach the Ray cluster at {address!r} ({error}); check that its head "
+            "node runs (`ray status` there), that the address and port are right (HOST:6379 "
+            "for a node of the cluster, ray://HOST:10001 for Ray Client) and that no "
+            "firewall blocks them; see docs/guides/clusters.md"
+        ) from None
+
+
 class _RayShardWorker(ShardWorker):
     """A :class:`ShardWorker` that fetches the phase's earlier calls from the object store."""
 
     def resolve(self, history: list[Any]) -> list[Any]:
         return import_ray().get(history)
 
-    def pid(self) -> int:
-        """The worker's process id (tests kill it)."""
-        import os
-
-        return os.getpid()
+    def where(self) -> tuple[str, int]:
+        """The worker's node id and process id (for tests and for finding its logs)."""
+        return import_ray().get_runtime_context().get_node_id(), os.getpid()
