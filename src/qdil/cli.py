@@ -34,7 +34,7 @@ FIT_USAGE = (
 FIT_EPILOG = (
     "--resume continues RUN_DIR from its last checkpoint with the recipe in its config.yaml; "
     "a run that stopped before its first checkpoint starts over in place. Only qd.iterations, "
-    "env.num_threads and logging.* may differ from the checkpoint's recipe. "
+    "env.num_threads, executor.* and logging.* may differ from the checkpoint's recipe. "
     "--reward.help NAME (a registered name or class path) lists a reward model's options."
 )
 
@@ -198,6 +198,7 @@ def fit(argv: list[str]) -> None:
     )
     from qdil.qd.loop import run_qd
     from qdil.rewards.base import NonFiniteRewardError
+    from qdil.rl.execution import ExecutorError
 
     config, resume_dir, stem = parse_fit(argv)
     parser = fit_parser()
@@ -249,6 +250,13 @@ def fit(argv: list[str]) -> None:
             f"qdil fit: error: {error}\nAfter the fix, `qdil fit --resume {run_dir}` continues "
             "the run from its last checkpoint (or starts it over if it has none)."
         ) from None
+    except ExecutorError as error:  # a worker that could not be replaced: resume later
+        raise SystemExit(
+            f"qdil fit: error: {error}\n`qdil fit --resume {run_dir}` continues the run from "
+            "its last checkpoint (or starts it over if it has none)."
+        ) from None
+    finally:
+        run.vppo.executor.close()
     run.tracker.finish(run)
     print(f"run directory: {run_dir}", file=sys.stderr)
 
@@ -272,7 +280,7 @@ def _check_unchanged(
             f"checkpoint was made with (checkpoint -> now):\n{lines}\n"
             "Restore these keys to resume, or start a new run from the edited file with "
             f"`qdil fit {run_dir / CONFIG_NAME} --name NEW_NAME`. Only qd.iterations, "
-            "env.num_threads and logging.* may change on resume."
+            "env.num_threads, executor.* and logging.* may change on resume."
         )
 
 
@@ -295,6 +303,7 @@ def _build(init: Namespace, name: str, run_dir: Path, resolved: str, *, resume: 
         logging=init.logging,
         config=yaml.safe_load(resolved),
         resume=resume,
+        executor=init.executor,
     )
 
 
@@ -520,6 +529,9 @@ def _is_user_error(error: BaseException) -> bool:
     # read from sys.modules: importing the modules here would cost every command torch
     checkpoint = sys.modules.get("qdil.qd.checkpoint")
     if checkpoint is not None and isinstance(error, checkpoint.CheckpointError):
+        return True
+    executors = sys.modules.get("qdil.rl.execution")  # e.g. an unreachable Ray cluster
+    if executors is not None and isinstance(error, executors.ExecutorError):
         return True
     # an incomplete plugin, or a reward model whose values turned NaN: the message names
     # the model and what to check; a traceback into the loop would only hide it

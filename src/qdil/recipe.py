@@ -21,6 +21,7 @@ from qdil.config import (
     QDConfig,
     RewardFactory,
 )
+from qdil.executors import Executor, LocalExecutor
 from qdil.rewards.base import RewardContractError, RewardModel, check_contract
 from qdil.rl.vppo import VPPO
 
@@ -45,7 +46,7 @@ MINIMUMS: dict[str, int] = {
 }
 
 # Keys whose value is a class (``class_path`` + ``init_args``, or a dotted path).
-CLASS_KEYS = ("reward", "rl", "qd.emitter", "qd.scheduler")
+CLASS_KEYS = ("reward", "rl", "qd.emitter", "qd.scheduler", "executor")
 
 
 def recipe(
@@ -56,6 +57,7 @@ def recipe(
     bonus: BonusConfig = BonusConfig(),  # noqa: B008
     demos: DemoConfig = DemoConfig(),  # noqa: B008
     logging: LoggingConfig = LoggingConfig(),  # noqa: B008
+    executor: Executor = lazy_instance(LocalExecutor),  # noqa: B008
     seed: int = 0,
     name: str | None = None,
 ) -> None:
@@ -71,6 +73,9 @@ def recipe(
             or ``ebc``).
         demos: demonstrations for the reward model.
         logging: run directory, checkpoints, W&B.
+        executor: who steps the simulations: ``qdil.executors.LocalExecutor`` (this
+            process) or ``qdil.executors.RayExecutor`` (Ray workers; ``address``,
+            ``num_workers``, ``threads_per_worker``). Results do not depend on it.
         seed: the run's seed; every random stream derives from it.
         name: run name and directory under ``logging.root`` (default: recipe name + seed).
     """

@@ -20,6 +20,7 @@ from qdil.qd.state import LoopState, Run
 from qdil.rewards.base import RewardModel
 from qdil.rewards.bonus import ExplorationBonus
 from qdil.rewards.ebc import EBCBonus
+from qdil.rl.execution import Executor
 from qdil.rl.networks import VectorizedActor
 from qdil.rl.normalize import RunningMeanStd
 from qdil.rl.vppo import VPPO
@@ -61,11 +62,13 @@ def build_run(
     logging: LoggingConfig,
     config: dict[str, Any],
     resume: bool = False,
+    executor: Executor | None = None,
 ) -> Run:
     """Build every component of a run from the instantiated recipe sections.
 
     With ``resume``, the reward model's offline pretraining is skipped: the checkpoint
     that :func:`~qdil.qd.checkpoint.load_checkpoint` restores next holds its result.
+    ``executor`` steps VPPO's simulations (default: here, :class:`LocalExecutor`).
 
     ``env.device`` places the run: the physics, policies, VPPO, the reward model (Fabric's
     accelerator) and the bonus run there; pyribs and xNES stay on the host.
@@ -153,7 +156,7 @@ def build_run(
         device=env.device,
         **env.task_kwargs,
     )
-    rl.setup(train_env, eval_env, vppo_seed, device)
+    rl.setup(train_env, eval_env, vppo_seed, device, executor)
 
     # ---- reward model, driven by Lightning Fabric; the bonus wraps it afterwards
     model = reward(obs_dim, action_dim, k)

@@ -29,7 +29,8 @@ import torch
 
 from qdil.cli import main
 from qdil.envs.vector import LocomotionVectorEnv
-from qdil.rl.collect import Collector, evaluate_policies
+from qdil.rl.collect import Collector
+from qdil.rl.episodes import evaluate_policies
 from qdil.rl.networks import VectorizedActor
 from qdil.rl.normalize import RunningMeanStd
 from qdil.rl.vppo import VPPO

@@ -106,13 +106,13 @@ def test_ppo_update_moves_the_policy_towards_higher_advantage() -> None:
     actor = VectorizedActor(1, 17, 6)
     actor.set_solutions(VectorizedActor.initial_solution(17, 6, seed=0)[None])
     stats = RunningMeanStd(1, (17,))
-    algo.collector.start(seed=0)
+    algo.executor.start(seed=0)
     optimizer = algo._adam(actor.parameters())
     obs = torch.zeros(1, 1, 17)
     with torch.no_grad():
         before = float(actor(obs)[0, 0, 0])
     for _ in range(3):
-        rollout, pdata = algo.collector.collect(actor, stats, 64, algo.generator, False)
+        rollout, pdata = algo.executor.collect(actor, stats, 64, algo.generator, False)
         rewards = pdata.actions[..., 0]
         ones = torch.ones_like(rewards)
         rollout = dataclasses.replace(rollout, dones=ones, terminated=ones)

@@ -19,6 +19,7 @@ Beyond gymnasium's keys, every ``info`` carries:
 from __future__ import annotations
 
 import warnings
+from functools import partial
 from typing import Any
 
 import gymnasium
@@ -53,6 +54,10 @@ class LocomotionVectorEnv(VectorEnv):
             ``mujoco`` backend runs on the CPU only.
         **task_kwargs: gymnasium's keyword arguments of the task, e.g. ``ctrl_cost_weight``.
 
+    Attributes:
+        factory: a picklable maker of the same task, horizon and backend, called as
+            ``factory(num_envs, autoreset_mode=..., num_threads=...)``.
+
     Raises:
         ValueError: for an unknown task, keyword, autoreset mode or a bad size.
     """
@@ -68,6 +73,16 @@ class LocomotionVectorEnv(VectorEnv):
         device: str = "cpu",
         **task_kwargs: Any,
     ) -> None:
+        # how to build this task again elsewhere (a remote worker's shard): by name, so that
+        # a worker finds the model files of its own installation
+        self.factory = partial(
+            LocomotionVectorEnv,
+            task,
+            max_episode_steps=max_episode_steps,
+            backend=backend,
+            device=device,
+            **task_kwargs,
+        )
         if isinstance(task, str):
             task = make_task(task, **task_kwargs)
         elif task_kwargs:

@@ -26,7 +26,7 @@ from qdil.envs.vector import LocomotionVectorEnv
 from qdil.files import atomic_write
 from qdil.qd.archives import QD_OFFSETS, elite_fields, make_grid, qd_metrics
 from qdil.qd.checkpoint import dumps_compact, load_archive
-from qdil.rl.collect import evaluate_policies
+from qdil.rl.episodes import evaluate_policies
 from qdil.rl.networks import VectorizedActor
 from qdil.rl.normalize import RunningMeanStd
 

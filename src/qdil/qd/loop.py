@@ -30,7 +30,7 @@ import torch
 from qdil.data import Rollout, TransitionBatch
 from qdil.qd.archives import QD_OFFSETS, qd_metrics
 from qdil.qd.checkpoint import save_checkpoint
-from qdil.rl.collect import Evaluation
+from qdil.rl.episodes import Evaluation
 from qdil.rl.normalize import RunningMeanStd
 
 if TYPE_CHECKING:
@@ -189,7 +189,7 @@ def qd_iteration(run: Run) -> dict[str, float]:
         }
     metrics |= {f"rl/jacobian_{k}": v for k, v in jacobian_phase.diagnostics.items()}
     metrics |= {f"rl/walk_{k}": v for k, v in walk.diagnostics.items()}
-    returns, _ = vppo.collector.pop_episode_stats()
+    returns, _ = vppo.executor.pop_episode_stats()
     if returns:
         metrics["rl/train_episode_return"] = float(np.mean(returns))
     metrics |= {f"reward/{k}": float(v) for k, v in reward_metrics.items()}

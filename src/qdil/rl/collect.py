@@ -2,8 +2,12 @@
 
 Environment slot e is served by policy ``e // (N / P)``: the N simulations are cut into P
 contiguous blocks. :class:`Collector` gathers fixed-length training rollouts (episodes run
-on across calls, autoreset within the step); :func:`evaluate_policies` plays whole
-episodes and scores each policy, stepping only simulations whose episode is still running.
+on across calls, autoreset within the step); :mod:`qdil.rl.episodes` plays whole episodes.
+
+A rollout is split in two so that an executor (:mod:`qdil.executors`) can run the stepping
+part on remote workers, each on a contiguous shard of the simulations, and assemble the
+same tensors on the head: :meth:`Collector.roll` steps, :func:`finish_rollout` applies the
+policies' statistics.
 
 Policies act in [-1, 1]^A: a sampled action is clipped there and mapped linearly to the
 task's action bounds, and PPO keeps the unclipped sample for its likelihood ratios.
@@ -25,6 +29,9 @@ from qdil.rl.sampler import PolicySampler
 
 RewardFn = Callable[[Rollout], torch.Tensor]
 """Maps a rollout to (T, N) per-step rewards."""
+
+Policy = Callable[[torch.Tensor], tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]]
+"""(n, obs_dim) raw observations -> normalised ones, (n, A) unclipped actions, (n,) log-probs."""
 
 
 class ActionMap:
@@ -89,8 +96,13 @@ class Collector:
         self._contacts: torch.Tensor | None = None
         self._starts: torch.Tensor | None = None
 
-    def start(self, seed: int) -> None:
-        """Reset every simulation (the start of a VPPO phase)."""
+    def start(self, seed: int | list[int]) -> None:
+        """Reset every simulation (the start of a VPPO phase).
+
+        Args:
+            seed: simulation i is seeded with ``seed + i``; a list gives one seed each (a
+                shard of a larger batch passes the seeds of its simulations).
+        """
         obs, info = self.env.reset(seed=seed)
         self._obs = torch.from_numpy(obs).float()
         self._contacts = torch.from_numpy(info["foot_contact"])
@@ -116,11 +128,29 @@ class Collector:
         Returns:
             The rollout (raw observations, executed actions, true rewards) and PPO's extras.
         """
-        if self._obs is None or self._contacts is None:
-            raise RuntimeError("call start() before collect()")
-        env, n = self.env, self.env.num_envs
+        n = self.env.num_envs
         if n % actor.num_models:
             raise ValueError(f"{n} environments cannot be split among {actor.num_models} policies")
+        sampler = PolicySampler(actor, stats, self.obs_clip)
+        steps = self.roll(lambda obs: sampler.sample(obs, generator), num_steps)
+        for _, _, returns, lengths in steps.ended:
+            self.episode_returns += returns.tolist()
+            self.episode_lengths += lengths.tolist()
+        return finish_rollout(steps, actor.num_models, stats, self.obs_clip, update_stats)
+
+    def roll(self, policy: Policy, num_steps: int) -> RolloutSteps:
+        """Step the simulations ``num_steps`` times with ``policy`` choosing the actions.
+
+        Args:
+            policy: maps the (n, obs_dim) observations of a step to the policies' outputs.
+            num_steps: T.
+
+        Returns:
+            The step buffers; episodes run on into the next call.
+        """
+        if self._obs is None or self._contacts is None or self._starts is None:
+            raise RuntimeError("call start() before collect()")
+        env, n = self.env, self.env.num_envs
         obs_dim, k = self._obs.shape[1], self._contacts.shape[1]
         action_dim = env.single_action_space.shape[0]
         shape = (num_steps, n)
@@ -141,13 +171,13 @@ class Collector:
         arr = {key: value.numpy() for key, value in buf.items()}
         norm_obs = torch.zeros((*shape, obs_dim))
         policy_actions = torch.zeros((*shape, action_dim))
-        sampler = PolicySampler(actor, stats, self.obs_clip)
+        ended: list[tuple[int, np.ndarray, np.ndarray, np.ndarray]] = []
         buf["obs"][0] = self._obs
         buf["contacts"][0] = self._contacts
         buf["starts"][0] = self._starts
         for t in range(num_steps):
             # the policies read s_t from the buffer it is stored in
-            norm, actions, log_probs = sampler.sample(buf["obs"][t], generator)
+            norm, actions, log_probs = policy(buf["obs"][t])
             executed = self.action_map(actions)
             next_obs, reward, terminated, truncated, info = env.step(executed.numpy())
             done = terminated | truncated
@@ -157,9 +187,9 @@ class Collector:
             if done.any():  # s_{t+1} is the final state, not the reset one
                 arr["next_obs"][t, done] = info["final_obs"][done]
                 arr["next_contacts"][t, done] = info["final_info"]["foot_contact"][done]
-                ended = info["episode"]["_r"]
-                self.episode_returns += info["episode"]["r"][ended].tolist()
-                self.episode_lengths += info["episode"]["l"][ended].tolist()
+                mask = info["episode"]["_r"]
+                episode = info["episode"]
+                ended.append((t, np.flatnonzero(mask), episode["r"][mask], episode["l"][mask]))
             buf["actions"][t] = executed
             arr["rewards"][t] = reward
             arr["dones"][t] = done
@@ -175,14 +205,7 @@ class Collector:
         self._obs = torch.from_numpy(next_obs).float()
         self._contacts = torch.from_numpy(contacts)
         self._starts = torch.from_numpy(done.astype(np.float32))
-        rollout = Rollout(**buf, valid=torch.ones(shape))
-        num_policies = actor.num_models
-        next_by_policy = policy_blocks(buf["next_obs"].transpose(0, 1), num_policies).flatten(1, 2)
-        norm_next = stats.normalize(next_by_policy, clip=self.obs_clip)
-        norm_next = norm_next.reshape(n, num_steps, obs_dim).transpose(0, 1)
-        if update_stats:
-            stats.update(policy_blocks(buf["obs"].transpose(0, 1), num_policies).flatten(1, 2))
-        return rollout, PolicyData(norm_obs, norm_next, policy_actions, buf["log_probs"])
+        return RolloutSteps(buf, norm_obs, policy_actions, ended)
 
     def pop_episode_stats(self) -> tuple[list[float], list[int]]:
         """Returns and lengths of the episodes finished since the last call."""
@@ -192,114 +215,46 @@ class Collector:
 
 
 @dataclass(frozen=True)
-class Evaluation:
-    """Scores of P policies, each averaged over its episodes.
+class RolloutSteps:
+    """What :meth:`Collector.roll` records, before the statistics are applied.
 
     Attributes:
-        objective: (P,) mean return under the reward function (the archive's objective).
-        true_objective: (P,) mean true return of the task.
-        measures: (P, k) mean episode measures.
-        lengths: (P,) mean episode lengths.
-        env_steps: simulated env steps.
+        buffers: the :class:`Rollout` fields except ``valid``, (T, n, ...) tensors.
+        norm_obs: (T, n, obs_dim) normalised s_t as the policies saw them.
+        policy_actions: (T, n, A) sampled, unclipped actions.
+        ended: per step where episodes ended: (t, (e,) simulation indices, (e,) returns,
+            (e,) lengths), indices in simulation order.
     """
 
-    objective: np.ndarray
-    true_objective: np.ndarray
-    measures: np.ndarray
-    lengths: np.ndarray
-    env_steps: int
+    buffers: dict[str, torch.Tensor]
+    norm_obs: torch.Tensor
+    policy_actions: torch.Tensor
+    ended: list[tuple[int, np.ndarray, np.ndarray, np.ndarray]]
 
 
-def evaluate_policies(
-    env: LocomotionVectorEnv,
-    actor: VectorizedActor,
+def finish_rollout(
+    steps: RolloutSteps,
+    num_policies: int,
     stats: RunningMeanStd,
-    episodes: int,
-    seed: int,
-    reward_fn: RewardFn | None = None,
-    deterministic: bool = False,
-    obs_clip: float = 10.0,
-    generator: torch.Generator | None = None,
-) -> Evaluation:
-    """Play ``episodes`` whole episodes per policy and average their scores.
+    obs_clip: float,
+    update_stats: bool,
+) -> tuple[Rollout, PolicyData]:
+    """The rollout and PPO's extras of all N simulations, P blocks of N/P.
 
     Args:
-        env: an environment with ``autoreset_mode=DISABLED`` and at least P·episodes slots.
-        actor: P policies.
-        stats: their observation statistics (frozen).
-        episodes: episodes per policy.
-        seed: reset seed.
-        reward_fn: scores the episodes for the objective; ``None`` means the true return.
-        deterministic: act with the mean action (re-evaluation) or sample (branch scoring).
+        steps: the recorded (T, N, ...) steps.
+        num_policies: P.
+        stats: the policies' observation statistics.
         obs_clip: bound of normalised observations.
-        generator: random source of the action noise.
-
-    Returns:
-        Per-policy means.
+        update_stats: merge the observations into ``stats``.
     """
-    num_policies = actor.num_models
-    used = num_policies * episodes
-    if env.num_envs < used:
-        raise ValueError(f"evaluation needs {used} environments, the env has {env.num_envs}")
-    running = np.zeros(env.num_envs, dtype=bool)
-    running[:used] = True
-    obs, info = env.reset(seed=seed, options={"reset_mask": running.copy()})
-    obs_t = torch.from_numpy(obs[:used]).float()
-    contacts = torch.from_numpy(info["foot_contact"][:used])
-    action_map = ActionMap(env.single_action_space.low, env.single_action_space.high)
-    returns, lengths = np.zeros(used), np.zeros(used)
-    measures = np.zeros((used, env.num_feet))
-    record = reward_fn is not None
-    steps: list[dict[str, torch.Tensor]] = []
-    env_steps = 0
-    actions_full = np.zeros((env.num_envs, env.single_action_space.shape[0]))
-    sampler = PolicySampler(actor, stats, obs_clip)
-    while running.any():
-        _, actions, log_probs = sampler.sample(obs_t, generator, deterministic, log_probs=record)
-        executed = action_map(actions)
-        actions_full[:used] = executed.numpy()
-        active = running.copy()
-        next_obs, reward, terminated, truncated, info = env.step(actions_full, mask=active)
-        env_steps += int(active.sum())
-        done = (terminated | truncated)[:used]
-        if done.any():
-            ended = info["episode"]["_r"][:used]
-            returns[ended] = info["episode"]["r"][:used][ended]
-            lengths[ended] = info["episode"]["l"][:used][ended]
-            measures[ended] = info["episode"]["measures"][:used][ended]
-        next_t = torch.from_numpy(next_obs[:used]).float()
-        next_contacts = torch.from_numpy(info["foot_contact"][:used])
-        if record:
-            steps.append(
-                {
-                    "obs": obs_t,
-                    "actions": executed,
-                    "contacts": contacts,
-                    "next_obs": next_t,
-                    "next_contacts": next_contacts,
-                    "rewards": torch.from_numpy(reward[:used]).float(),
-                    "dones": torch.from_numpy(done.astype(np.float32)),
-                    "terminated": torch.from_numpy(terminated[:used].astype(np.float32)),
-                    "log_probs": log_probs,
-                    "valid": torch.from_numpy(active[:used].astype(np.float32)),
-                    "starts": torch.full((used,), float(not steps)),
-                }
-            )
-        running[:used] &= ~done
-        obs_t, contacts = next_t, next_contacts
-    objective = returns
-    if record:
-        assert reward_fn is not None
-        rollout = Rollout(**{key: torch.stack([s[key] for s in steps]) for key in steps[0]})
-        objective = (reward_fn(rollout) * rollout.valid).sum(0).double().numpy()
-
-    def per_policy(x: np.ndarray) -> np.ndarray:
-        return x.reshape(num_policies, episodes, *x.shape[1:]).mean(axis=1)
-
-    return Evaluation(
-        objective=per_policy(objective),
-        true_objective=per_policy(returns),
-        measures=per_policy(measures),
-        lengths=per_policy(lengths),
-        env_steps=env_steps,
-    )
+    buf = steps.buffers
+    num_steps, n, obs_dim = buf["obs"].shape
+    rollout = Rollout(**buf, valid=torch.ones((num_steps, n)))
+    next_by_policy = policy_blocks(buf["next_obs"].transpose(0, 1), num_policies).flatten(1, 2)
+    norm_next = stats.normalize(next_by_policy, clip=obs_clip)
+    norm_next = norm_next.reshape(n, num_steps, obs_dim).transpose(0, 1)
+    if update_stats:
+        stats.update(policy_blocks(buf["obs"].transpose(0, 1), num_policies).flatten(1, 2))
+    pdata = PolicyData(steps.norm_obs, norm_next, steps.policy_actions, buf["log_probs"])
+    return rollout, pdata

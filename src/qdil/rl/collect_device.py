@@ -26,7 +26,8 @@ import torch
 from qdil.data import Rollout
 from qdil.envs.torch_vector import TorchVectorEnv
 from qdil.envs.vector import LocomotionVectorEnv
-from qdil.rl.collect import ActionMap, Evaluation, PolicyData, RewardFn, policy_blocks
+from qdil.rl.collect import ActionMap, PolicyData, RewardFn, policy_blocks
+from qdil.rl.episodes import Evaluation
 from qdil.rl.networks import VectorizedActor
 from qdil.rl.normalize import RunningMeanStd
 from qdil.rl.sampler import PolicySampler

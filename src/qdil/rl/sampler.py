@@ -30,16 +30,29 @@ class PolicySampler:
     2σ² broadcast from (P, 1, A) instead of being expanded, which leaves every element's
     value unchanged), so actions and log-likelihoods are bit-identical to theirs.
 
+    CPU BLAS (MKL) takes a different path for a small batched product whose input is not
+    64-byte aligned, which changes the last bit. A sampler for part of a larger batch (a
+    remote worker's shard) passes ``align``: its normalised input is then placed where the
+    whole batch's would be, relative to a 64-byte boundary, so its products are those of
+    the whole batch.
+
     Args:
         actor: P policies; their parameters must not change while the sampler is used.
         stats: their observation statistics (frozen).
         obs_clip: bound of normalised observations (``None``: no clipping).
+        align: float32 elements between a 64-byte boundary and the first policy's input
+            in the whole batch (0: the input is a fresh, aligned tensor, as locally).
     """
 
     def __init__(
-        self, actor: VectorizedActor, stats: RunningMeanStd, obs_clip: float | None
+        self,
+        actor: VectorizedActor,
+        stats: RunningMeanStd,
+        obs_clip: float | None,
+        align: int = 0,
     ) -> None:
         self.actor = actor
+        self.align = align % 16  # 16 float32 elements: 64 bytes
         self.num_policies = actor.num_models
         self.obs_clip = obs_clip
         with torch.no_grad():
@@ -56,6 +69,7 @@ class PolicySampler:
         generator: torch.Generator | None,
         deterministic: bool = False,
         log_probs: bool = True,
+        noise: torch.Tensor | None = None,
     ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]:
         """Sample actions for N observations, N/P consecutive ones per policy.
 
@@ -64,6 +78,8 @@ class PolicySampler:
             generator: random source of the Gaussian noise.
             deterministic: take the mean action (draws no noise).
             log_probs: compute the log-likelihoods (``None`` in their place otherwise).
+            noise: (N, A) standard normal noise drawn elsewhere (a remote worker replays
+                the head's stream); ``generator`` is then not used.
 
         Returns:
             ``(norm_obs, actions, log_probs)``: (N, obs_dim), (N, A) unclipped, (N,).
@@ -74,12 +90,16 @@ class PolicySampler:
             norm = (x - self.obs_mean) / self.obs_scale
             if self.obs_clip is not None:
                 norm = norm.clamp(-self.obs_clip, self.obs_clip)
+            if self.align:
+                placed = torch.empty(norm.numel() + self.align)[self.align :].view(norm.shape)
+                norm = placed.copy_(norm)
             mean = self.actor.mlp(norm, self.operands)
             if deterministic:
                 actions = mean
             else:
-                noise = torch.randn(mean.shape, generator=generator, device=mean.device)
-                actions = mean + self.std * noise
+                if noise is None:
+                    noise = torch.randn(mean.shape, generator=generator, device=mean.device)
+                actions = mean + self.std * noise.reshape(mean.shape)
             logp = None
             if log_probs:
                 logp = (

@@ -43,10 +43,10 @@ import numpy as np
 import torch
 
 from qdil.data import Rollout
-from qdil.envs.torch_vector import TorchVectorEnv, has_torch_face
 from qdil.envs.vector import LocomotionVectorEnv
-from qdil.rl.collect import Collector, Evaluation, PolicyData, evaluate_policies
-from qdil.rl.collect_device import DeviceCollector, evaluate_on_device
+from qdil.rl.collect import ActionMap, PolicyData
+from qdil.rl.episodes import Evaluation
+from qdil.rl.execution import Executor, default_executor
 from qdil.rl.networks import VectorizedActor, VectorizedCritic
 from qdil.rl.normalize import RunningMeanStd
 from qdil.rl.ppo import PPOSettings, ppo_update
@@ -165,6 +165,7 @@ class VPPO:
         eval_env: LocomotionVectorEnv,
         seed: int,
         device: torch.device | str = "cpu",
+        executor: Executor | None = None,
     ) -> None:
         """Bind the environments and build the persistent critics.
 
@@ -178,6 +179,7 @@ class VPPO:
             seed: seed of the critics' initialisation and the action noise.
             device: the run's device: policies, critics, statistics, rollout buffers and
                 the noise generator live there; it must be the physics' device.
+            executor: who steps the simulations (default: here, on the physics' device).
 
         Raises:
             ValueError: if N is not divisible by k+1, or ``device`` is not the physics'
@@ -198,12 +200,13 @@ class VPPO:
                     f"would run on {self.device}; one env.device places both"
                 )
         self.train_env, self.eval_env = train_env, eval_env
-        self.collector: Collector | DeviceCollector = (
-            DeviceCollector(train_env, self.obs_clip)
-            if has_torch_face(train_env)
-            else Collector(train_env, self.obs_clip)
+        if train_env.autoreset_mode.value != "SameStep":
+            raise ValueError("the training environment must use autoreset_mode=SAME_STEP")
+        self.executor = default_executor(train_env) if executor is None else executor
+        self.executor.setup(train_env, eval_env, self.obs_clip)
+        self.action_map = ActionMap(
+            train_env.single_action_space.low, train_env.single_action_space.high, self.device
         )
-        self.eval_face = TorchVectorEnv(eval_env) if has_torch_face(eval_env) else None
         self.obs_dim = train_env.single_observation_space.shape[0]
         self.action_dim = train_env.single_action_space.shape[0]
         self.num_objectives = num_objectives
@@ -262,11 +265,11 @@ class VPPO:
         actor = self._actor(np.repeat(theta[None], k1, axis=0))
         copies_stats = RunningMeanStd.stack([stats.to(self.device)] * k1)
         actor_opt = self._adam([p for p in actor.parameters() if p.requires_grad])
-        self.collector.start(seed)
+        self.executor.start(seed)
         block = self.train_env.num_envs // k1
         rollouts, diagnostics = [], []
         for _ in range(self.jacobian_iterations):
-            rollout, pdata = self.collector.collect(
+            rollout, pdata = self.executor.collect(
                 actor, copies_stats, self.rollout_length, self.generator, update_stats=False
             )
             # copy 0: the reward of f; copy j: the measure proxy δ_j after the step
@@ -317,10 +320,10 @@ class VPPO:
         stats = stats.to(self.device).select([0])
         actor_opt = self._adam([p for p in actor.parameters() if p.requires_grad])
         c = torch.as_tensor(coefficients, dtype=torch.float32, device=self.device)
-        self.collector.start(seed)
+        self.executor.start(seed)
         rollouts, diagnostics = [], []
         for _ in range(self.walk_iterations):
-            rollout, pdata = self.collector.collect(
+            rollout, pdata = self.executor.collect(
                 actor, stats, self.rollout_length, self.generator, update_stats=True
             )
             rewards = c[0] * reward_fn(rollout) + (rollout.next_contacts * c[1:]).sum(-1)
@@ -349,33 +352,13 @@ class VPPO:
         reward_fn: RewardFn | None = None,
         deterministic: bool = False,
     ) -> Evaluation:
-        """Score P solutions over ``episodes`` episodes each (see :func:`evaluate_policies`)."""
+        """Score P solutions over ``episodes`` episodes each (see ``evaluate_policies``)."""
         actor = VectorizedActor(len(solutions), self.obs_dim, self.action_dim, self.actor_hidden)
         actor = actor.to(self.device)
         actor.set_solutions(solutions)  # exactly the stored policies, log σ included
         stats = stats.to(self.device)
-        if self.eval_face is not None:
-            return evaluate_on_device(
-                self.eval_face,
-                actor,
-                stats,
-                episodes,
-                seed,
-                reward_fn,
-                deterministic,
-                self.obs_clip,
-                self.generator,
-            )
-        return evaluate_policies(
-            self.eval_env,
-            actor,
-            stats,
-            episodes,
-            seed,
-            reward_fn,
-            deterministic,
-            self.obs_clip,
-            self.generator,
+        return self.executor.evaluate(
+            actor, stats, episodes, seed, reward_fn, deterministic, self.generator
         )
 
     def log_probs(
@@ -392,7 +375,7 @@ class VPPO:
         actor = VectorizedActor(1, self.obs_dim, self.action_dim, self.actor_hidden)
         actor = actor.to(self.device)
         actor.set_solutions(solution[None])
-        action_map = self.collector.action_map
+        action_map = self.action_map
         obs, actions, stats = obs.to(self.device), actions.to(self.device), stats.to(self.device)
         policy_actions = (actions - action_map.low) / action_map.half - 1.0
         with torch.no_grad():

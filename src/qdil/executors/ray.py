@@ -1,0 +1,137 @@
+"""Rollouts and evaluations on Ray actors, on one machine or a cluster (`qdil[ray]` extra).
+
+Ray does the scheduling, the transport and the fault handling: every worker is an actor
+(one training shard each, :class:`~qdil.executors.worker.ShardWorker`) created with
+``max_restarts`` and unlimited task retries, so when a worker's process or node dies Ray
+starts it again (on any node with a free CPU) and runs the interrupted call again; the
+worker replays its phase from references the head keeps, so the retried call returns the
+same numbers. A worker that cannot be restarted stops the run with an
+:class:`~qdil.rl.execution.ExecutorError`; ``qdil fit --resume`` continues it from its
+last checkpoint, with Ray or locally. The head sends each call once to Ray's object store
+(``ray.put``) and the workers read it from there.
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+import socket
+from typing import Any
+
+from qdil.executors.sharded import ShardedExecutor
+from qdil.executors.worker import ShardWorker
+from qdil.rl.execution import ExecutorError
+
+INSTALL_HINT = "the Ray executor needs Ray: pip install 'qdil[ray]'"
+CONNECT_TIMEOUT_S = 5.0
+
+
+def import_ray() -> Any:
+    """The ``ray`` module, or an ImportError that says how to install it."""
+    try:
+        return importlib.import_module("ray")
+    except ImportError as error:
+        raise ImportError(INSTALL_HINT) from error
+
+
+class RayExecutor(ShardedExecutor):
+    """Simulations in shards on Ray actors; PPO, rewards, pyribs and xNES stay on the head.
+
+    Args:
+        address: the Ray cluster to join: ``null`` starts Ray on this machine unless this
+            process already joined one (``ray.init`` was called), ``auto`` joins the
+            cluster started on this machine with ``ray start``, ``HOST:6379`` joins a
+            cluster's head node from one of its machines, ``ray://HOST:10001`` connects
+            through Ray Client.
+        num_workers: actors W, one shard of simulations each; each asks Ray for
+            ``threads_per_worker`` CPUs.
+        threads_per_worker: physics and torch threads of each worker.
+        max_restarts: how often Ray may restart each worker after its process or node
+            died (``-1``: without limit) before the run stops.
+    """
+
+    def __init__(
+        self,
+        address: str | None = None,
+        num_workers: int = 2,
+        threads_per_worker: int = 1,
+        max_restarts: int = 3,
+    ) -> None:
+        super().__init__(num_workers, threads_per_worker)
+        self.address, self.max_restarts = address, max_restarts
+        self.workers: list[Any] = []
+
+    def _launch(self, factory: Any, bounds: list[tuple[int, int]]) -> None:
+        ray = import_ray()
+        if not ray.is_initialized():
+            _check_reachable(self.address)
+            try:
+                ray.init(address=self.address, log_to_driver=True)
+            except (ConnectionError, TimeoutError) as error:
+                raise ExecutorError(
+                    f"cannot reach the Ray cluster at {self.address!r}: {error}. Start it "
+                    "(`ray start --head` on the head node, see docs/guides/clusters.md) or set "
+                    "executor.init_args.address to its address"
+                ) from error
+        actor = ray.remote(
+            num_cpus=self.threads_per_worker,
+            max_restarts=self.max_restarts,
+            max_task_retries=-1,  # retried calls replay the phase: the result is the same
+        )(_RayShardWorker)
+        self.workers = [
+            actor.remote(factory, start, stop, self.threads_per_worker) for start, stop in bounds
+        ]
+
+    def _share(self, value: Any) -> Any:
+        return import_ray().put(value)
+
+    def _run(self, method: str, calls: list[tuple[int, tuple]]) -> list[Any]:
+        ray = import_ray()
+        futures = [getattr(self.workers[i], method).remote(*args) for i, args in calls]
+        try:
+            return ray.get(futures)
+        except ray.exceptions.RayActorError as error:
+            raise ExecutorError(
+                f"a Ray worker died and could not be restarted (max_restarts="
+                f"{self.max_restarts}): {error}\nThe run stops here; `qdil fit --resume "
+                "RUN_DIR` continues it from its last checkpoint, on the cluster or locally."
+            ) from error
+
+    def close(self) -> None:
+        """Stop the workers (the Ray cluster itself keeps running)."""
+        ray = import_ray()
+        for worker in self.workers:
+            ray.kill(worker, no_restart=True)
+        self.workers = []
+
+
+def _check_reachable(address: str | None) -> None:
+    """Refuse an address whose port does not answer (``ray.init`` would wait for minutes).
+
+    Raises:
+        ExecutorError: naming the address.
+    """
+    if address in (None, "auto", "local"):
+        return  # ray.init finds (or starts) the local cluster, or says it cannot
+    host, _, port = address.removeprefix("ray://").rpartition(":")
+    try:
+        with socket.create_connection((host, int(port)), timeout=CONNECT_TIMEOUT_S):
+            pass
+    except (OSError, ValueError) as error:
+        raise ExecutorError(
+            f"cannot reach the Ray cluster at {address!r} ({error}); check that its head "
+            "node runs (`ray status` there), that the address and port are right (HOST:6379 "
+            "for a node of the cluster, ray://HOST:10001 for Ray Client) and that no "
+            "firewall blocks them; see docs/guides/clusters.md"
+        ) from None
+
+
+class _RayShardWorker(ShardWorker):
+    """A :class:`ShardWorker` that fetches the phase's earlier calls from the object store."""
+
+    def resolve(self, history: list[Any]) -> list[Any]:
+        return import_ray().get(history)
+
+    def where(self) -> tuple[str, int]:
+        """The worker's node id and process id (for tests and for finding its logs)."""
+        return import_ray().get_runtime_context().get_node_id(), os.getpid()

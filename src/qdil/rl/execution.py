@@ -1,0 +1,179 @@
+"""The executor seam: who steps the simulations of VPPO's rollouts and evaluation episodes.
+
+VPPO hands its policies to an :class:`Executor` and gets rollouts and scores back; it keeps
+PPO, and the QD loop keeps the reward model, pyribs and xNES. :class:`LocalExecutor` (the
+default) steps the simulations in this process, :class:`DeviceExecutor` does so on a device
+backend's torch face; :mod:`qdil.executors` has the remote ones.
+"""
+
+from __future__ import annotations
+
+import abc
+
+import torch
+
+from qdil.data import Rollout
+from qdil.envs.torch_vector import TorchVectorEnv, has_torch_face
+from qdil.envs.vector import LocomotionVectorEnv
+from qdil.rl.collect import Collector, PolicyData, RewardFn
+from qdil.rl.collect_device import DeviceCollector, evaluate_on_device
+from qdil.rl.episodes import Evaluation, evaluate_policies
+from qdil.rl.networks import VectorizedActor
+from qdil.rl.normalize import RunningMeanStd
+
+
+class ExecutorError(RuntimeError):
+    """Execution failed in a way the run cannot recover from by itself (the message says why)."""
+
+
+class Executor(abc.ABC):
+    """Runs VPPO's training rollouts and evaluation episodes; VPPO keeps everything else.
+
+    Every executor returns the same tensors for the same inputs: the same rollouts,
+    bit for bit, as :class:`~qdil.rl.collect.Collector` and
+    :func:`~qdil.rl.episodes.evaluate_policies` on the head's environments, and it draws
+    the same action noise from ``generator``, leaving it in the same state.
+    """
+
+    @abc.abstractmethod
+    def setup(
+        self, train_env: LocomotionVectorEnv, eval_env: LocomotionVectorEnv, obs_clip: float
+    ) -> None:
+        """Bind the head's environments (their sizes and tasks) and the observation clip."""
+
+    @abc.abstractmethod
+    def start(self, seed: int) -> None:
+        """Reset every training simulation (simulation i with ``seed + i``)."""
+
+    @abc.abstractmethod
+    def collect(
+        self,
+        actor: VectorizedActor,
+        stats: RunningMeanStd,
+        num_steps: int,
+        generator: torch.Generator,
+        update_stats: bool,
+    ) -> tuple[Rollout, PolicyData]:
+        """Roll out ``num_steps`` steps of P policies (see ``Collector.collect``)."""
+
+    @abc.abstractmethod
+    def pop_episode_stats(self) -> tuple[list[float], list[int]]:
+        """Returns and lengths of the training episodes finished since the last call."""
+
+    @abc.abstractmethod
+    def evaluate(
+        self,
+        actor: VectorizedActor,
+        stats: RunningMeanStd,
+        episodes: int,
+        seed: int,
+        reward_fn: RewardFn | None,
+        deterministic: bool,
+        generator: torch.Generator,
+    ) -> Evaluation:
+        """Score P policies over ``episodes`` episodes each (see ``evaluate_policies``)."""
+
+    @abc.abstractmethod
+    def close(self) -> None:
+        """Release the workers, if any."""
+
+
+class LocalExecutor(Executor):
+    """Steps every simulation here, physics threaded by ``env.num_threads``."""
+
+    def setup(
+        self, train_env: LocomotionVectorEnv, eval_env: LocomotionVectorEnv, obs_clip: float
+    ) -> None:
+        """Bind the environments; the training one keeps its state across ``collect``."""
+        self.collector = Collector(train_env, obs_clip)
+        self.eval_env, self.obs_clip = eval_env, obs_clip
+
+    def start(self, seed: int) -> None:
+        """Reset every training simulation."""
+        self.collector.start(seed)
+
+    def collect(
+        self,
+        actor: VectorizedActor,
+        stats: RunningMeanStd,
+        num_steps: int,
+        generator: torch.Generator,
+        update_stats: bool,
+    ) -> tuple[Rollout, PolicyData]:
+        """Roll out ``num_steps`` steps of P policies (``Collector.collect``)."""
+        return self.collector.collect(actor, stats, num_steps, generator, update_stats)
+
+    def pop_episode_stats(self) -> tuple[list[float], list[int]]:
+        """Returns and lengths of the training episodes finished since the last call."""
+        return self.collector.pop_episode_stats()
+
+    def evaluate(
+        self,
+        actor: VectorizedActor,
+        stats: RunningMeanStd,
+        episodes: int,
+        seed: int,
+        reward_fn: RewardFn | None,
+        deterministic: bool,
+        generator: torch.Generator,
+    ) -> Evaluation:
+        """Score P policies over ``episodes`` episodes each (``evaluate_policies``)."""
+        return evaluate_policies(
+            self.eval_env,
+            actor,
+            stats,
+            episodes,
+            seed,
+            reward_fn,
+            deterministic,
+            self.obs_clip,
+            generator,
+        )
+
+    def close(self) -> None:
+        """Nothing to release: the environments belong to the run."""
+
+
+class DeviceExecutor(LocalExecutor):
+    """Steps every simulation here through the env's torch face, on its device.
+
+    For device backends (``env.backend: warp``): rollouts and evaluations go through
+    :class:`~qdil.rl.collect_device.DeviceCollector` and
+    :func:`~qdil.rl.collect_device.evaluate_on_device`, so no step copies to the host.
+    """
+
+    def setup(
+        self, train_env: LocomotionVectorEnv, eval_env: LocomotionVectorEnv, obs_clip: float
+    ) -> None:
+        """Bind the environments' torch faces."""
+        self.collector = DeviceCollector(train_env, obs_clip)  # type: ignore[assignment]
+        self.eval_face = TorchVectorEnv(eval_env)
+        self.eval_env, self.obs_clip = eval_env, obs_clip
+
+    def evaluate(
+        self,
+        actor: VectorizedActor,
+        stats: RunningMeanStd,
+        episodes: int,
+        seed: int,
+        reward_fn: RewardFn | None,
+        deterministic: bool,
+        generator: torch.Generator,
+    ) -> Evaluation:
+        """Score P policies over ``episodes`` episodes each (``evaluate_on_device``)."""
+        return evaluate_on_device(
+            self.eval_face,
+            actor,
+            stats,
+            episodes,
+            seed,
+            reward_fn,
+            deterministic,
+            self.obs_clip,
+            generator,
+        )
+
+
+def default_executor(train_env: LocomotionVectorEnv) -> LocalExecutor:
+    """The in-process executor that fits the physics: on the device, or numpy's."""
+    return DeviceExecutor() if has_torch_face(train_env) else LocalExecutor()
