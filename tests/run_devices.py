@@ -41,7 +41,7 @@ def _tensors(name: str, value: object) -> Iterator[tuple[str, torch.Tensor]]:
 
 
 def run_tensors(run: Run) -> dict[str, torch.Tensor]:
-    """Every tensor of a run's torch side: VPPO, collector, reward model, bonus, demos."""
+    """Every tensor of a run's torch side: VPPO, its executor's collector, reward model, bonus, demos."""
     vppo = run.vppo
     parts = {
         "jacobian_critic": vppo.jacobian_critic,
@@ -50,7 +50,8 @@ def run_tensors(run: Run) -> dict[str, torch.Tensor]:
         "walk_critic_opt": vppo.walk_critic_opt,
         "jacobian_returns": vppo.jacobian_returns,
         "walk_returns": vppo.walk_returns,
-        "action_map": vars(vppo.collector.action_map),
+        "action_map": vars(vppo.action_map),
+        "collector_action_map": vars(vppo.executor.collector.action_map),
         "reward": run.reward,
         "expert": {}
         if run.expert is None

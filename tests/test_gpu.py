@@ -58,12 +58,12 @@ def test_every_tensor_of_a_run_is_on_the_gpu(tmp_path: Path, walker_demos) -> No
     assert off_device(run, torch.device("cuda")) == []
     assert run.fabric.device.type == "cuda"
     assert run.env.physics.torch_exported.device.type == "cuda"
-    assert isinstance(run.vppo.collector, DeviceCollector)
+    assert isinstance(run.vppo.executor.collector, DeviceCollector)
 
 
 def test_a_rollout_does_not_sync_with_the_host_per_step(tmp_path: Path) -> None:
     run = build(SMOKE, tmp_path / "run", *ON_GPU)
-    vppo, collector = run.vppo, run.vppo.collector
+    vppo, collector = run.vppo, run.vppo.executor.collector
     actor = vppo._actor(vppo.initial_solution(0)[None].repeat(vppo.num_objectives, 0))
     stats = RunningMeanStd(vppo.num_objectives, (vppo.obs_dim,), device="cuda")
     collector.start(seed=0)

@@ -17,8 +17,9 @@ pytest.importorskip("mujoco_warp", reason="the warp extra is not installed")
 
 from qdil.envs.torch_vector import TorchVectorEnv
 from qdil.envs.vector import LocomotionVectorEnv
-from qdil.rl.collect import Collector, evaluate_policies
+from qdil.rl.collect import Collector
 from qdil.rl.collect_device import DeviceCollector, evaluate_on_device
+from qdil.rl.episodes import evaluate_policies
 from qdil.rl.networks import VectorizedActor
 from qdil.rl.normalize import RunningMeanStd
 
