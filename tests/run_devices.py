@@ -41,7 +41,7 @@ def _tensors(name: str, value: object) -> Iterator[tuple[str, torch.Tensor]]:
 
 
 def run_tensors(run: Run) -> dict[str, torch.Tensor]:
-    """Every tensor of a run's torch side: VPPO, its executor's collector, reward model, bonus, demos."""
+    """Every tensor of a run's torch side: VPPO, its collector, reward model, bonus, demos."""
     vppo = run.vppo
     parts = {
         "jacobian_critic": vppo.jacobian_critic,

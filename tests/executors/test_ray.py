@@ -27,6 +27,10 @@ def one_node():
     ray.shutdown()
 
 
+# Each Ray test starts worker processes that import qdil and compile the physics kernels
+# (about a minute per test on 2 busy cores). The default suite keeps the one that proves
+# both points of the issue: a killed worker's work is redone and the results equal local.
+@pytest.mark.slow
 def test_two_ray_workers_give_the_local_results(one_node, local) -> None:
     executor = RayExecutor(num_workers=2)
     got = run_phases(executor)
@@ -56,6 +60,7 @@ def test_a_killed_worker_is_replaced_and_its_work_redone(one_node, local) -> Non
     executor.close()
 
 
+@pytest.mark.slow
 def test_a_worker_that_cannot_restart_stops_with_the_resume_command(one_node) -> None:
     executor = _KillsAWorker(num_workers=2, max_restarts=0)
     with pytest.raises(ExecutorError, match="qdil fit --resume"):
