@@ -10,10 +10,15 @@ whose arrays never leave the device.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import torch
+
+if TYPE_CHECKING:
+    import torch
+
+# torch is imported inside the functions: they only run on tensors, when torch is loaded
+# already, and `import qdil` (which registers the tasks) must not pay for torch.
 
 
 class _TorchFunctions:
@@ -21,34 +26,49 @@ class _TorchFunctions:
 
     @staticmethod
     def concatenate(arrays: Sequence[torch.Tensor], axis: int = 0) -> torch.Tensor:
+        import torch
+
         return torch.cat(list(arrays), dim=axis)
 
     @staticmethod
     def clip(x: torch.Tensor, low: float, high: float) -> torch.Tensor:
+        import torch
+
         return torch.clip(x, low, high)
 
     @staticmethod
     def sum(x: torch.Tensor, axis: int | None = None) -> torch.Tensor:
+        import torch
+
         return torch.sum(x) if axis is None else torch.sum(x, dim=axis)
 
     @staticmethod
     def square(x: torch.Tensor) -> torch.Tensor:
+        import torch
+
         return torch.square(x)
 
     @staticmethod
     def isfinite(x: torch.Tensor) -> torch.Tensor:
+        import torch
+
         return torch.isfinite(x)
 
     @staticmethod
     def all(x: torch.Tensor, axis: int) -> torch.Tensor:
+        import torch
+
         return torch.all(x, dim=axis)
 
     @staticmethod
     def copy(x: torch.Tensor) -> torch.Tensor:
+
         return x.clone()
 
     @staticmethod
     def zeros_like(x: torch.Tensor, dtype: type = bool) -> torch.Tensor:
+        import torch
+
         return torch.zeros_like(x, dtype=torch.bool if dtype is bool else x.dtype)
 
 
@@ -73,5 +93,7 @@ def constant(
         return value
     key = (like.device, like.dtype)
     if key not in cache:
+        import torch
+
         cache[key] = torch.as_tensor(value, dtype=like.dtype, device=like.device)
     return cache[key]
