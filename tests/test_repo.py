@@ -3,7 +3,11 @@
 from __future__ import annotations
 
 import re
+import shutil
+import subprocess
 from pathlib import Path
+
+import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -24,3 +28,18 @@ def test_ci_runs_the_readme_test_command() -> None:
     test_command = readme_commands()[1]
     install_and_test = test_command.split(". .venv/bin/activate && ", 1)[1]
     assert install_and_test in (ROOT / ".ci" / "run").read_text()
+
+
+def test_report_records_are_not_ignored_by_git() -> None:
+    """``qdil report`` keeps run records in ``<out>/runs/``; they must be committable.
+
+    An unanchored ``runs/`` pattern once ignored every ``docs/reports/*/runs/`` folder, so the
+    records that let a report be remade never reached the repository.
+    """
+    if shutil.which("git") is None or not (ROOT / ".git").exists():
+        pytest.skip("needs git and a checkout")
+    record = "docs/reports/any-report/runs/any-run/record.json"
+    kept = subprocess.run(["git", "check-ignore", "-q", record], cwd=ROOT, check=False)
+    assert kept.returncode == 1, f"{record} is ignored by .gitignore"
+    run_dir = subprocess.run(["git", "check-ignore", "-q", "runs/any-run"], cwd=ROOT, check=False)
+    assert run_dir.returncode == 0, "run directories at the root should stay ignored"
