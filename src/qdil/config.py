@@ -120,6 +120,10 @@ class BonusConfig:
             uses the 2^k binary contact patterns (the measures are 0/1 flags).
         offset: ``ebc`` only: p, added to every training step whatever the cell (the EBC
             runners: 0).
+        in_fitness: ``single_step`` only: evaluations get the bonus too, so the CMA-MAE
+            archive and xNES rank by learned return + bonus (the paper's Algorithm 1, the
+            default). ``false`` hands the bonus to training rollouts only, as EBC does: RL
+            still explores, the archive ranks by the learned reward alone.
     """
 
     enabled: bool = False
@@ -127,6 +131,7 @@ class BonusConfig:
     weight: float = 1.0
     cells: int | None = None
     offset: float = 0.0
+    in_fitness: bool = True
 
     def problems(self) -> list[str]:
         """Settings that do not apply to ``type``, each naming its key (empty if none)."""
@@ -140,6 +145,11 @@ class BonusConfig:
             problems.append(
                 f"bonus.offset applies to bonus.type ebc only; remove it or set it to 0, "
                 f"got {self.offset}"
+            )
+        if self.type != "single_step" and not self.in_fitness:
+            problems.append(
+                f"bonus.in_fitness applies to bonus.type single_step only (the {self.type} "
+                f"bonus never enters the archive's objective); remove it or set it to true"
             )
         return problems
 

@@ -45,7 +45,9 @@ def with_bonus(model: RewardModel, bonus: BonusConfig, archives: RunArchives) ->
     if bonus.type == "ebc":
         # read through the container: a resume replaces archives.main with the checkpoint's
         return EBCBonus(model, lambda: archives.main, weight=bonus.weight, offset=bonus.offset)
-    return ExplorationBonus(model, weight=bonus.weight, cells=bonus.cells)
+    return ExplorationBonus(
+        model, weight=bonus.weight, cells=bonus.cells, in_fitness=bonus.in_fitness
+    )
 
 
 def build_run(

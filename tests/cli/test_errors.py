@@ -128,6 +128,10 @@ CASES = {
         ["fit", "{smoke}", "--bonus.offset", "1"],
         ["bonus.offset applies to bonus.type ebc only", "got 1.0"],
     ),
+    "bonus in_fitness under ebc": (
+        ["fit", "{smoke}", "--bonus.type", "ebc", "--bonus.in_fitness", "false"],
+        ["bonus.in_fitness applies to bonus.type single_step only"],
+    ),
     "recipe is a directory": (["fit", "{empty}"], ["{empty}", "is a directory"]),
     "emitter in a missing module (recipe)": (
         ["fit", "{bad_recipe}"],

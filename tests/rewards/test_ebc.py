@@ -132,6 +132,10 @@ def test_the_default_bonus_section_is_the_single_step_bonus() -> None:
     [
         (BonusConfig(type="ebc", cells=4), "bonus.cells applies to bonus.type single_step only"),
         (BonusConfig(offset=0.5), "bonus.offset applies to bonus.type ebc only"),
+        (
+            BonusConfig(type="ebc", in_fitness=False),
+            "bonus.in_fitness applies to bonus.type single_step only",
+        ),
     ],
 )
 def test_settings_of_the_other_bonus_type_are_refused_by_name(

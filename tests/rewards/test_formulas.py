@@ -89,6 +89,20 @@ def test_bonus_shrinks_towards_one_half_for_a_dominant_pattern() -> None:
     assert r[0, 1].item() == pytest.approx(1.0, abs=1e-6)
 
 
+def test_bonus_out_of_the_fitness_goes_to_training_rollouts_only() -> None:
+    contacts = torch.tensor([[[1.0, 1.0], [0.0, 0.0]]])
+    paper, training_only = ExplorationBonus(_Base()), ExplorationBonus(_Base(), in_fitness=False)
+    # evaluations: the archive objective sees the wrapped model's reward alone (zeros here)
+    assert training_only.predict_reward(rollout_of(contacts)).abs().max().item() == 0.0
+    assert paper.predict_reward(rollout_of(contacts)).min().item() == pytest.approx(0.8)
+    # training: the same bonus and the same visit counts as the paper's placement
+    torch.testing.assert_close(
+        training_only.predict_reward(rollout_of(contacts), update=True),
+        paper.predict_reward(rollout_of(contacts), update=True),
+    )
+    torch.testing.assert_close(training_only.counts, paper.counts)
+
+
 def test_finer_bonus_grid_for_continuous_measures() -> None:
     bonus = ExplorationBonus(_Base(), cells=10)
     assert bonus.counts.shape == (100,)

@@ -47,6 +47,7 @@ IMPLICIT_KEYS = {
     "env.device": "cpu",
     "bonus.type": "single_step",
     "bonus.offset": 0.0,
+    "bonus.in_fitness": True,
 }
 
 

@@ -31,10 +31,19 @@ class ExplorationBonus(BonusWrapper):
         model: the wrapped reward model.
         weight: multiplier of r_exp (the paper: 1).
         cells: cells per measure; ``None`` for the 2^k binary contact patterns.
+        in_fitness: add the bonus to evaluation episodes too, so that the archive ranks by
+            learned return + bonus (the paper); ``False``: training rollouts only.
     """
 
-    def __init__(self, model: RewardModel, weight: float = 1.0, cells: int | None = None) -> None:
+    def __init__(
+        self,
+        model: RewardModel,
+        weight: float = 1.0,
+        cells: int | None = None,
+        in_fitness: bool = True,
+    ) -> None:
         super().__init__(model, weight, suffix="bonus")
+        self.in_fitness = in_fitness
         if cells is not None and cells < 1:
             raise ValueError(f"bonus.cells must be positive or null, got {cells}")
         self.cells = cells
@@ -73,9 +82,12 @@ class ExplorationBonus(BonusWrapper):
         return (1.0 / (1.0 + p)).float()
 
     @override
-    def added(self, rollout: Rollout, update: bool) -> torch.Tensor:
+    def added(self, rollout: Rollout, update: bool) -> torch.Tensor | None:
         # evaluations get the bonus too (from the current counts, adding no visits): the
-        # archive ranks by learned return + bonus, as the WQDIL paper's algorithm does
+        # archive ranks by learned return + bonus, as the WQDIL paper's algorithm does;
+        # without in_fitness the archive sees the learned reward alone
+        if not update and not self.in_fitness:
+            return None
         return self.weight * self.bonus(rollout, update)
 
     @override
