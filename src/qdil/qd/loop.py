@@ -118,9 +118,11 @@ def qd_iteration(run: Run) -> dict[str, float]:
     jacobian_phase = vppo.compute_jacobian(theta, stats, train_reward, state.next_seed())
     jacobian = (jacobian_phase.solutions.astype(np.float64) - theta)[None]
     timings["jacobian"] = time.perf_counter() - tic
+    tic_mean = time.perf_counter()
     mean_eval = vppo.evaluate(
         theta[None], stats, qd.mean_episodes, state.next_seed(), eval_reward, qd.deterministic_eval
     )
+    timings["mean_evaluate"] = time.perf_counter() - tic_mean
     fields = fields_from_stats(stats, mean_eval.lengths)
     scheduler.tell_dqd(_objective(run, mean_eval), mean_eval.measures, jacobian, **fields)
     run.archives.add(
