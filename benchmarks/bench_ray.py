@@ -1,7 +1,7 @@
 """One QD iteration's simulation work, locally and on 1 and 2 Ray workers, on this machine.
 
 Runs what a QD iteration asks of the executor for a mid-size setting (default: Walker2d,
-512 training simulations, 64 branches × ``--episodes`` episodes): the Jacobian phase
+510 training simulations (VPPO needs a multiple of k + 1 = 3), 64 branches × ``--episodes`` episodes): the Jacobian phase
 (``--jacobian`` rollouts of 3 policies), the branch and mean evaluations, and the walk
 (``--walk`` rollouts of 1 policy), with the PPO updates left out so that the numbers
 compare the executors, not the head. Prints env-steps/s for each executor, the ratio to
@@ -10,7 +10,7 @@ across executors (``tests/executors``); this measures only speed.
 
 Usage::
 
-    python benchmarks/bench_ray.py [--num-envs 512] [--branches 64] [--episodes 2]
+    python benchmarks/bench_ray.py [--num-envs 510] [--branches 64] [--episodes 2]
         [--rollout 64] [--jacobian 2] [--walk 2] [--workers 1 2] [--repeats 2]
 """
 
@@ -80,7 +80,9 @@ def measure(executor, args: argparse.Namespace) -> tuple[float, int, int]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--task", default="Walker2d-v5")
-    parser.add_argument("--num-envs", type=int, default=512)
+    parser.add_argument(
+        "--num-envs", type=int, default=510, help="training simulations, a multiple of k + 1"
+    )
     parser.add_argument("--branches", type=int, default=64)
     parser.add_argument("--episodes", type=int, default=2)
     parser.add_argument("--horizon", type=int, default=200)
