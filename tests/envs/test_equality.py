@@ -104,12 +104,20 @@ def test_reset_distribution_equals_gymnasium_for_many_seeds() -> None:
     assert_close(ours.reset()[0], reference.reset()[0], "continued stream")
 
 
-def test_physics_thread_count_does_not_change_results() -> None:
-    results = []
-    for threads in (1, 2):
+def test_physics_threads_and_chunks_do_not_change_results() -> None:
+    """Threads, and the chunks of simulations prange hands them, leave every trajectory alone.
+
+    Chunk size 0 is numba's static split (one block per thread), the default before chunks.
+    """
+
+    def trace(threads: int, chunk_size: int | None) -> np.ndarray:
         env = gym.make_vec("qdil/Walker2d-v5", num_envs=8, num_threads=threads)
+        if chunk_size is not None:
+            env.unwrapped.physics.chunk_size = chunk_size
         env.reset(seed=3)
         rng = np.random.default_rng(4)
-        trace = [env.step(rng.uniform(-1, 1, (8, 6)))[0] for _ in range(60)]
-        results.append(np.stack(trace))
-    np.testing.assert_array_equal(results[0], results[1])
+        return np.stack([env.step(rng.uniform(-1, 1, (8, 6)))[0] for _ in range(60)])
+
+    reference = trace(1, 0)
+    for threads, chunk_size in [(2, 0), (1, None), (2, None), (2, 1), (2, 3), (2, 64)]:
+        np.testing.assert_array_equal(trace(threads, chunk_size), reference)

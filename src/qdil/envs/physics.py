@@ -186,6 +186,10 @@ def export_slices(bounds: list[tuple[str, int, int]], names: list[str]) -> dict[
     return slices
 
 
+# chunks of simulations per physics thread in a step (docs/benchmarks.md, "Environments")
+CHUNKS_PER_THREAD = 8
+
+
 def default_num_threads() -> int:
     """Threads for physics: ``$QDIL_NUM_THREADS`` if set, else every core this process may use."""
     configured = os.environ.get("QDIL_NUM_THREADS")
@@ -239,6 +243,11 @@ class MujocoBatch:
         self.model = model
         self.num_sims = num_sims
         self.num_threads = num_threads or default_num_threads()
+        # prange hands out chunks of this many simulations as threads free up (numba splits
+        # into one static block per thread otherwise), about CHUNKS_PER_THREAD per thread: a
+        # step waits less for a thread whose simulations hit more contacts or whose core
+        # another process holds; results do not depend on it (each simulation is independent)
+        self.chunk_size = max(1, -(-num_sims // (CHUNKS_PER_THREAD * self.num_threads)))
         self.rne_post_constraint = rne_post_constraint
         self.datas = [mujoco.MjData(model) for _ in range(num_sims)]
         self._model_ptr = model._address
@@ -277,21 +286,22 @@ class MujocoBatch:
             active: (N,) bool mask of simulations to step; ``None`` for all.
         """
         numba.set_num_threads(self.num_threads)
-        _step_kernel(
-            self._model_ptr,
-            self._data_ptrs,
-            self._ctrl_ptrs,
-            ctrl,
-            self._all if active is None else active,
-            nstep,
-            self.rne_post_constraint,
-            self._sources,
-            self._lengths,
-            self._offsets,
-            self.exported,
-            self._sensor_ptrs,
-            self.sensordata,
-        )
+        with numba.parallel_chunksize(self.chunk_size):
+            _step_kernel(
+                self._model_ptr,
+                self._data_ptrs,
+                self._ctrl_ptrs,
+                ctrl,
+                self._all if active is None else active,
+                nstep,
+                self.rne_post_constraint,
+                self._sources,
+                self._lengths,
+                self._offsets,
+                self.exported,
+                self._sensor_ptrs,
+                self.sensordata,
+            )
 
     def reset(self, ids: np.ndarray, qpos: np.ndarray, qvel: np.ndarray) -> None:
         """Reset simulations ``ids`` to the given states, as gymnasium's ``set_state``.
