@@ -1,12 +1,13 @@
 """One QD iteration's simulation work, locally and on 1 and 2 Ray workers, on this machine.
 
 Runs what a QD iteration asks of the executor for a mid-size setting (default: Walker2d,
-510 training simulations (VPPO needs a multiple of k + 1 = 3), 64 branches × ``--episodes`` episodes): the Jacobian phase
-(``--jacobian`` rollouts of 3 policies), the branch and mean evaluations, and the walk
-(``--walk`` rollouts of 1 policy), with the PPO updates left out so that the numbers
-compare the executors, not the head. Prints env-steps/s for each executor, the ratio to
-local, and the bytes each iteration sends and receives. The results are bit-identical
-across executors (``tests/executors``); this measures only speed.
+510 training simulations, a multiple of k + 1 = 3 as VPPO needs, 64 branches ×
+``--episodes`` episodes): the Jacobian phase (``--jacobian`` rollouts of 3 policies), the
+branch and mean evaluations, and the walk (``--walk`` rollouts of 1 policy), with the PPO
+updates left out so that the numbers compare the executors, not the head. Prints
+env-steps/s for each executor, the ratio to local, and the bytes each iteration sends and
+receives. The results are bit-identical across executors (``tests/executors``); this
+measures only speed.
 
 Usage::
 
