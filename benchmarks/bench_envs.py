@@ -19,6 +19,7 @@ warm-up each), so a machine whose load drifts slows them alike; each number is t
 Usage::
 
     python benchmarks/bench_envs.py [--tasks Walker2d-v5 ...] [--num-envs 64 256] [--steps 200]
+        [--reps 5] [--no-gym] [--all-cores-only]
 """
 
 from __future__ import annotations
@@ -112,6 +113,11 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=200, help="vector steps per repetition")
     parser.add_argument("--reps", type=int, default=5, help="alternating timed rounds")
     parser.add_argument("--no-gym", action="store_true", help="skip gymnasium's sync env")
+    parser.add_argument(
+        "--all-cores-only",
+        action="store_true",
+        help="skip the one-thread contestants and the raw loop (for large N)",
+    )
     args = parser.parse_args()
 
     cores = os.cpu_count() or 1
@@ -131,32 +137,43 @@ def main() -> None:
             actions = rng.uniform(low, high, size=(args.steps, n, low.size)).astype(np.float32)
             contestants = {
                 "qdil": bench_vector(gym.make_vec(f"qdil/{task_id}", num_envs=n), actions),
-                "qdil1": bench_vector(
-                    gym.make_vec(f"qdil/{task_id}", num_envs=n, num_threads=1), actions
-                ),
             }
-            for name, threads in (("envpool", cores), ("envpool1", 1)):
+            if not args.all_cores_only:
+                contestants["qdil1"] = bench_vector(
+                    gym.make_vec(f"qdil/{task_id}", num_envs=n, num_threads=1), actions
+                )
+            pools = (
+                (("envpool", cores),)
+                if args.all_cores_only
+                else (("envpool", cores), ("envpool1", 1))
+            )
+            for name, threads in pools:
                 pool = make_envpool(task_id, n, threads)
                 if pool is not None:
                     contestants[name] = bench_envpool(pool, actions)
             if not args.no_gym:
                 gym_env = gym.make_vec(task_id, num_envs=n, vectorization_mode="sync")
                 contestants["gym"] = bench_vector(gym_env, actions)
-            contestants["raw"] = bench_raw(task_id, actions[: max(1, args.steps // 8)])
+            if not args.all_cores_only:
+                contestants["raw"] = bench_raw(task_id, actions[: max(1, args.steps // 8)])
             rates = _median_rates(contestants, args.reps)
-            print("| " + " | ".join(_row(task_id, n, rates)) + " |", flush=True)
+            skipped = {"gym"} if args.no_gym else set()
+            if args.all_cores_only:
+                skipped |= {"qdil1", "envpool1", "raw"}
+            print("| " + " | ".join(_row(task_id, n, rates, skipped)) + " |", flush=True)
 
 
-def _row(task_id: str, n: int, rates: dict[str, float]) -> list[str]:
+def _row(task_id: str, n: int, rates: dict[str, float], skipped: set[str]) -> list[str]:
     def rate(name: str) -> str:
-        return f"{rates[name]:,.0f}" if name in rates else "not installed"
+        if name in rates:
+            return f"{rates[name]:,.0f}"
+        return "skipped" if name in skipped else "not installed"
 
     def ratio(a: str, b: str) -> str:
         return f"{rates[a] / rates[b]:.2f}x" if a in rates and b in rates else "-"
 
     names = ("qdil", "qdil1", "envpool", "envpool1", "gym", "raw")
     cells = [task_id, str(n), *map(rate, names)]
-    cells[6] = cells[6] if "gym" in rates else "skipped"
     cells += [ratio("qdil", "envpool"), ratio("qdil1", "envpool1")]
     return [*cells, ratio("qdil", "gym"), ratio("qdil", "raw")]
 
