@@ -225,6 +225,8 @@ def test_fit_of_wqdil_with_its_bonus_is_pinned(
             "mcwae_wgail",
             "--reward.reward_type",
             "calibrated",
+            "--reward.latent_dim",  # the pin predates the default of 32
+            "8",
             "--bonus.enabled",
             "true",
             "--bonus.weight",

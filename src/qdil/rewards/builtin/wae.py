@@ -94,7 +94,10 @@ class WAEReward(AdversarialReward):
         obs_dim: observation size.
         action_dim: action size.
         num_measures: k.
-        latent_dim: size of z.
+        latent_dim: size of z (the paper does not give it). 32 (Walker2d's and
+            HalfCheetah's inputs have 25 numbers) keeps the action in the code: with 8 the
+            critic hardly tells a good action from a bad one in the same state
+            (``benchmarks/reward_actions.py``, docs/rewards/balance.md).
         hidden: widths of encoder, decoder and latent adversary (the paper: (100, 100)).
         regularization: λ (the paper: 1).
         reward_type: ``gail`` (−log(1 − σ(D(z̄)) + 1e-8), default), ``calibrated`` (the
@@ -113,7 +116,7 @@ class WAEReward(AdversarialReward):
         action_dim: int,
         num_measures: int,
         *,
-        latent_dim: int = 8,
+        latent_dim: int = 32,
         hidden: Sequence[int] = (100, 100),
         regularization: float = 1.0,
         reward_type: Literal["gail", "calibrated", "standardized", "critic", "sigmoid"] = "gail",
