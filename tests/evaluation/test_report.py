@@ -437,6 +437,28 @@ def test_records_remake_the_same_report_without_checkpoints(
     ).read_text()
 
 
+def test_records_keep_the_method_labels_of_their_report(
+    made: SimpleNamespace, tmp_path: Path
+) -> None:
+    kept = shutil.copytree(made.out / "runs", tmp_path / "records")
+    labelled = write_report([kept], tmp_path / "labelled", labels={kept / "true0": "Expert A"})
+    assert {r.path.name: r.method for r in labelled.runs}["true0"] == "Expert A"
+    # remade from the labelled report's records, with no --label: the runs group as before
+    again = write_report([tmp_path / "labelled" / "runs"], tmp_path / "again")
+    methods = {r.path.name: r.method for r in again.runs}
+    assert methods["true0"] == "Expert A"
+    assert methods["true1"] == {r.path.name: r.method for r in labelled.runs}["true1"]
+    # a label given now still wins over the one a record kept
+    relabelled = write_report(
+        [tmp_path / "labelled" / "runs"],
+        tmp_path / "relabelled",
+        labels={tmp_path / "labelled" / "runs" / "true0": "Expert B"},
+    )
+    assert {r.path.name: r.method for r in relabelled.runs}["true0"] == "Expert B"
+    record = json.loads((tmp_path / "relabelled" / "runs" / "true0" / "record.json").read_text())
+    assert record["method"] == "Expert B"
+
+
 def test_an_unreadable_record_is_left_out_with_its_reason(
     made: SimpleNamespace, tmp_path: Path
 ) -> None:

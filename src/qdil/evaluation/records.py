@@ -46,6 +46,8 @@ class Record:
         metrics: final metrics, keys of :func:`qdil.qd.archives.qd_metrics`.
         archive: the final archive (only objectives and measures are kept).
         notes: remarks the report made on the run.
+        method: the run's method label in the report (``--label`` or the recipe's), so that
+            a report remade from records groups the runs as the original did.
     """
 
     iteration: int | None
@@ -53,6 +55,7 @@ class Record:
     metrics: dict[str, float]
     archive: GridArchive
     notes: list[str] = field(default_factory=list)
+    method: str | None = None
 
 
 class RecordError(ValueError):
@@ -79,8 +82,12 @@ def write_record(run_dir: Path, record: Record, dest: Path) -> Path:
         return dest  # the run is this record already
     tmp = dest.with_name(dest.name + ".tmp")
     shutil.rmtree(tmp, ignore_errors=True)
-    if is_record(run_dir):  # a record kept by another report: copied as it is
+    if is_record(run_dir):  # a record kept by another report: copied, with this report's label
         shutil.copytree(run_dir, tmp)
+        summary = json.loads((tmp / RECORD_JSON).read_text())
+        if record.method is not None:
+            summary["method"] = record.method
+        (tmp / RECORD_JSON).write_text(json.dumps(summary, indent=1) + "\n")
         return _swap(tmp, dest)
     tmp.mkdir(parents=True)
     for name in COPIED:
@@ -94,6 +101,7 @@ def write_record(run_dir: Path, record: Record, dest: Path) -> Path:
         "source": record.source,
         "metrics": record.metrics,
         "notes": [note for note in record.notes if not note.startswith("seed ")],
+        "method": record.method,
         "dims": [int(d) for d in archive.dims],
         "ranges": [
             [float(lo), float(hi)]
@@ -147,4 +155,16 @@ def read_record(path: Path) -> Record:
     if len(values):
         archive.add(np.zeros((len(values), 1)), values[:, 1], values[:, 2:])
     source = f"{summary.get('source', '?')}; from the record of {summary.get('origin', '?')}"
-    return Record(summary.get("iteration"), source, metrics, archive, summary.get("notes", []))
+    notes = summary.get("notes", [])
+    return Record(summary.get("iteration"), source, metrics, archive, notes, summary.get("method"))
+
+
+def record_method(path: Path) -> str | None:
+    """The method label a record kept, or None (no record, an older one, or unreadable)."""
+    if not is_record(path):
+        return None
+    try:
+        method = json.loads((path / RECORD_JSON).read_text()).get("method")
+    except (OSError, ValueError, AttributeError):
+        return None
+    return method if isinstance(method, str) else None

@@ -150,7 +150,7 @@ def keep_records(runs: Iterable[RunResult], folder: Path) -> list[str]:
             name = f"{run.path.name}-{n}"
         names.add(name)
         assert run.archive is not None  # every included run has its final archive
-        record = Record(run.iteration, run.source, run.metrics, run.archive, run.notes)
+        record = Record(run.iteration, run.source, run.metrics, run.archive, run.notes, run.method)
         write_record(run.path, record, folder / name)
         written.append(f"{folder.name}/{name}")
     return written

@@ -36,7 +36,7 @@ import numpy as np
 import yaml
 from ribs.archives import GridArchive
 
-from qdil.evaluation.records import RecordError, is_record, read_record
+from qdil.evaluation.records import RecordError, is_record, read_record, record_method
 from qdil.evaluation.rescore import CORRECTED, EVAL_JSON
 from qdil.qd.archives import QD_OFFSETS, qd_metrics
 from qdil.qd.checkpoint import CheckpointError, load_archive
@@ -294,7 +294,7 @@ def load_run(path: Path, label: str | None = None) -> RunResult:
 
     Args:
         path: the run directory.
-        label: method label overriding :func:`method_label`.
+        label: method label overriding the one a record kept and :func:`method_label`.
 
     Returns:
         The run; ``problems`` says why it is left out, ``notes`` what to know about it.
@@ -306,7 +306,7 @@ def load_run(path: Path, label: str | None = None) -> RunResult:
     except (OSError, yaml.YAMLError, KeyError, TypeError) as error:
         run.problems.append(f"{CONFIG_NAME} unreadable or without env.task ({error!r})")
         return run
-    run.method = label or method_label(config)
+    run.method = label or record_method(path) or method_label(config)
     run.seed = config.get("seed")
     run.target = (config.get("qd") or {}).get("iterations")
     metrics_path = path / METRICS_NAME
