@@ -157,14 +157,3 @@ def read_record(path: Path) -> Record:
     source = f"{summary.get('source', '?')}; from the record of {summary.get('origin', '?')}"
     notes = summary.get("notes", [])
     return Record(summary.get("iteration"), source, metrics, archive, notes, summary.get("method"))
-
-
-def record_method(path: Path) -> str | None:
-    """The method label a record kept, or None (no record, an older one, or unreadable)."""
-    if not is_record(path):
-        return None
-    try:
-        method = json.loads((path / RECORD_JSON).read_text()).get("method")
-    except (OSError, ValueError, AttributeError):
-        return None
-    return method if isinstance(method, str) else None

@@ -36,7 +36,7 @@ import numpy as np
 import yaml
 from ribs.archives import GridArchive
 
-from qdil.evaluation.records import RecordError, is_record, read_record, record_method
+from qdil.evaluation.records import RecordError, is_record, read_record
 from qdil.evaluation.rescore import CORRECTED, EVAL_JSON
 from qdil.qd.archives import QD_OFFSETS, qd_metrics
 from qdil.qd.checkpoint import CheckpointError, load_archive
@@ -240,14 +240,18 @@ def light_copy(archive: GridArchive) -> GridArchive:
     return light
 
 
-def _final_archive(run: RunResult) -> None:
-    """Fill ``run``'s final archive, metrics and source (corrected archive preferred)."""
+def _final_archive(run: RunResult, label: str | None = None) -> None:
+    """Fill ``run``'s final archive, metrics and source (corrected archive preferred).
+
+    A record also gives the method label its report used, unless ``label`` overrides it.
+    """
     if is_record(run.path):
         try:
             record = read_record(run.path)
         except RecordError as error:
             run.problems.append(str(error))
             return
+        run.method = label or record.method or run.method
         run.iteration, run.source, run.metrics = record.iteration, record.source, record.metrics
         run.archive = record.archive
         run.notes.extend(record.notes)
@@ -306,7 +310,7 @@ def load_run(path: Path, label: str | None = None) -> RunResult:
     except (OSError, yaml.YAMLError, KeyError, TypeError) as error:
         run.problems.append(f"{CONFIG_NAME} unreadable or without env.task ({error!r})")
         return run
-    run.method = label or record_method(path) or method_label(config)
+    run.method = label or method_label(config)
     run.seed = config.get("seed")
     run.target = (config.get("qd") or {}).get("iterations")
     metrics_path = path / METRICS_NAME
@@ -319,7 +323,7 @@ def load_run(path: Path, label: str | None = None) -> RunResult:
     else:
         steps = next(iter(run.curves.values()))[0]
         run.last_logged = int(steps[-1]) if len(steps) else None
-    _final_archive(run)
+    _final_archive(run, label)
     if run.included and run.unfinished:
         run.notes.insert(
             0,
