@@ -8,7 +8,8 @@ from pathlib import Path
 
 import torch
 
-from qdil.cli import _build, fit_parser, parse_fit
+from qdil.cli.fit import build as build_parsed
+from qdil.cli.fit import fit_parser, parse_fit
 from qdil.qd.state import Run
 from qdil.rl.normalize import RunningMeanStd
 
@@ -18,7 +19,7 @@ def build(recipe: Path, run_dir: Path, *overrides: str) -> Run:
     config, _, _ = parse_fit([str(recipe), *overrides])
     config.name = "devices"
     init = fit_parser().instantiate(config)
-    return _build(init, "devices", run_dir, "", resume=False)
+    return build_parsed(init, "devices", run_dir, "", resume=False)
 
 
 def _tensors(name: str, value: object) -> Iterator[tuple[str, torch.Tensor]]:

@@ -17,6 +17,9 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import IO
 
+# a run directory's recipe, as `qdil fit` resolved it; the mark of a run directory
+CONFIG_NAME = "config.yaml"
+
 # atomic_write's temporary files: ".<name>.tmp-<pid>"
 TEMPORARY = re.compile(r"^\..+\.tmp-(\d+)$")
 

@@ -25,6 +25,7 @@ import yaml
 import qdil
 from qdil.demos.dataset import DemoSet
 from qdil.envs.vector import LocomotionVectorEnv
+from qdil.files import CONFIG_NAME
 from qdil.qd.checkpoint import load_archive
 from qdil.rl.collect import ActionMap
 from qdil.rl.networks import VectorizedActor
@@ -185,7 +186,7 @@ def demos_from_run(
         ValueError: if the archive holds no elites.
     """
     run_dir = Path(run_dir)
-    config = yaml.safe_load((run_dir / "config.yaml").read_text())
+    config = yaml.safe_load((run_dir / CONFIG_NAME).read_text())
     archive, iteration = load_archive(run_dir, "true")
     elites = archive.data()
     if len(elites["objective"]) == 0:

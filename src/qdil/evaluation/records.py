@@ -29,11 +29,12 @@ import numpy as np
 from ribs.archives import GridArchive
 
 from qdil.evaluation.rescore import EVAL_JSON
+from qdil.files import CONFIG_NAME
 
 RECORD_JSON = "record.json"
 ARCHIVE_CSV = "archive.csv"
 RECORD_FORMAT = 1
-COPIED = ("config.yaml", "metrics.csv", EVAL_JSON)
+COPIED = (CONFIG_NAME, "metrics.csv", EVAL_JSON)
 
 
 @dataclass

@@ -23,7 +23,7 @@ import yaml
 from ribs.archives import GridArchive
 
 from qdil.envs.vector import LocomotionVectorEnv
-from qdil.files import atomic_write
+from qdil.files import CONFIG_NAME, atomic_write
 from qdil.qd.archives import QD_OFFSETS, elite_fields, make_grid, qd_metrics
 from qdil.qd.checkpoint import dumps_compact, load_archive
 from qdil.rl.episodes import evaluate_policies
@@ -56,7 +56,7 @@ def rescore_archive(
         The corrected archive and a summary with its metrics.
     """
     run_dir = Path(run_dir)
-    config = yaml.safe_load((run_dir / "config.yaml").read_text())
+    config = yaml.safe_load((run_dir / CONFIG_NAME).read_text())
     archive, iteration = load_archive(run_dir, "true")
     elites = archive.data()
     env_cfg = config["env"]

@@ -38,10 +38,10 @@ from ribs.archives import GridArchive
 
 from qdil.evaluation.records import RecordError, is_record, read_record
 from qdil.evaluation.rescore import CORRECTED, EVAL_JSON
+from qdil.files import CONFIG_NAME
 from qdil.qd.archives import QD_OFFSETS, qd_metrics
 from qdil.qd.checkpoint import CheckpointError, load_archive
 
-CONFIG_NAME = "config.yaml"
 METRICS_NAME = "metrics.csv"
 
 DISPLAY_NAMES: dict[str, str] = {

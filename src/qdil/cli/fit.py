@@ -1,0 +1,296 @@
+"""``qdil fit``: parse a recipe (or a run to resume), build the run, loop, checkpoint."""
+
+from __future__ import annotations
+
+import shutil
+import sys
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from qdil.files import CONFIG_NAME
+
+# Only the standard library at import time (see qdil.cli): torch, Lightning and pyribs load
+# inside the functions that use them.
+if TYPE_CHECKING:
+    from jsonargparse import ArgumentParser, Namespace
+
+    from qdil.run import Run
+
+FIT_USAGE = (
+    "qdil fit RECIPE.yaml [--section.key VALUE ...]\n"
+    "       qdil fit --resume RUN_DIR [--qd.iterations N ...]"
+)
+FIT_EPILOG = (
+    "--resume continues RUN_DIR from its last checkpoint with the recipe in its config.yaml; "
+    "a run that stopped before its first checkpoint starts over in place. Only qd.iterations, "
+    "env.num_threads, executor.* and logging.* may differ from the checkpoint's recipe. "
+    "--reward.help NAME (a registered name or class path) lists a reward model's options."
+)
+
+
+def fit_parser() -> ArgumentParser:
+    """The jsonargparse parser of ``qdil fit``."""
+    from jsonargparse import ActionConfigFile, ArgumentParser
+
+    from qdil.recipe import recipe
+
+    parser = ArgumentParser(
+        prog="qdil fit",
+        usage=FIT_USAGE,
+        description="Train a QD-IL archive from a recipe: a YAML file with the sections "
+        "below; any key can be overridden on the command line.",
+        epilog=FIT_EPILOG,
+        default_env=False,
+        exit_on_error=False,
+    )
+    parser.add_argument("--config", action=ActionConfigFile, help="the recipe (YAML)")
+    parser.add_function_arguments(recipe, as_positional=False)
+    return parser
+
+
+def _resolve_reward_names(config: dict) -> dict:
+    """Turn a registered reward name (``reward: gail``) into its class path."""
+    from qdil.rewards import get_reward
+
+    reward = config.get("reward")
+    if isinstance(reward, str) and "." not in reward:
+        cls = get_reward(reward)
+        config["reward"] = {"class_path": f"{cls.__module__}.{cls.__qualname__}"}
+    elif isinstance(reward, dict) and "." not in str(reward.get("class_path", ".")):
+        cls = get_reward(reward["class_path"])
+        config["reward"] = {**reward, "class_path": f"{cls.__module__}.{cls.__qualname__}"}
+    return config
+
+
+def _rewrite_reward_flag(argv: list[str]) -> list[str]:
+    """``--reward gail`` / ``--reward.help gail`` (a registered name) -> the class path."""
+    from qdil.rewards import get_reward
+
+    out = list(argv)
+    for i, arg in enumerate(out):
+        value = None
+        if arg in ("--reward", "--reward.help") and i + 1 < len(out):
+            value, index = out[i + 1], i + 1
+        elif arg.startswith(("--reward=", "--reward.help=")):
+            value, index = arg.split("=", 1)[1], i
+        if value and "." not in value and not value.startswith("{") and value.isidentifier():
+            cls = get_reward(value)
+            path = f"{cls.__module__}.{cls.__qualname__}"
+            out[index] = path if index == i + 1 else f"{arg.split('=', 1)[0]}={path}"
+    return out
+
+
+def _help_request(argv: list[str]) -> list[str] | None:
+    """The first help flag of ``argv`` with its value (``--help``, ``--reward.help gail``)."""
+    for i, arg in enumerate(argv):
+        if arg in ("-h", "--help"):
+            return ["--help"]
+        flag = arg.split("=", 1)[0]
+        if flag.startswith("--") and flag.endswith(".help"):
+            if "=" in arg or i + 1 >= len(argv) or argv[i + 1].startswith("-"):
+                return [arg]
+            return [arg, argv[i + 1]]
+    return None
+
+
+def fit_help(request: list[str]) -> None:
+    """Print ``qdil fit``'s help (or a class's, for ``--reward.help NAME``) and exit 0."""
+    from qdil.rewards import discover
+
+    discover()  # registered names and plugin classes, for --reward.help NAME
+    try:
+        request = _rewrite_reward_flag(request)
+    except ValueError as error:
+        raise SystemExit(f"qdil fit: error: {request[0]}: {error}") from None
+    try:
+        fit_parser().parse_args(request)  # a help action prints and exits 0
+    except Exception as error:  # an unknown class for --X.help: jsonargparse names it
+        raise SystemExit(f"qdil fit: error: {error}") from None
+    raise SystemExit(0)  # not reached: help actions exit
+
+
+def parse_fit(argv: list[str]) -> tuple[Namespace, Path | None, str]:
+    """Parse ``qdil fit`` arguments; returns (config, run dir to resume or None, recipe stem).
+
+    The values are checked here, before any run directory exists.
+
+    Raises:
+        SystemExit: with a message naming the recipe key on a bad recipe.
+    """
+    import yaml
+
+    from qdil.recipe import check_values, class_path_problem
+    from qdil.rewards import discover
+
+    discover()
+    resume_dir = None
+    if argv and argv[0] == "--resume":
+        if len(argv) < 2:
+            raise SystemExit("qdil fit --resume needs a run directory")
+        resume_dir = Path(argv[1])
+        config_path = resume_dir / CONFIG_NAME
+        if not config_path.is_file():
+            raise SystemExit(
+                f"{resume_dir} is not a qdil run directory (no {CONFIG_NAME}); give a "
+                "directory made by `qdil fit RECIPE.yaml`"
+            )
+        base, overrides, stem = config_path, argv[2:], resume_dir.name
+    elif argv and not argv[0].startswith("-"):
+        base, overrides, stem = Path(argv[0]), argv[1:], Path(argv[0]).stem
+        if not base.exists():
+            raise SystemExit(f"recipe {base} not found")
+        if base.is_dir():
+            examples = sorted(base.glob("*.yaml"))[:1]
+            example = f", e.g. {examples[0]}" if examples else ""
+            raise SystemExit(f"recipe {base} is a directory; give a recipe file (YAML){example}")
+    else:
+        raise SystemExit(f"usage: {FIT_USAGE}\n(qdil fit --help lists the recipe's keys)")
+    try:
+        content = yaml.safe_load(base.read_text()) or {}
+    except yaml.YAMLError as error:
+        raise SystemExit(f"recipe {base} is not valid YAML: {error}") from None
+    except (OSError, UnicodeDecodeError) as error:
+        raise SystemExit(f"recipe {base} cannot be read: {error}") from None
+    if not isinstance(content, dict):
+        raise SystemExit(f"recipe {base} must be a mapping of sections (env, reward, rl, qd, ...)")
+    try:
+        content = _resolve_reward_names(content)
+        overrides = _rewrite_reward_flag(overrides)
+    except ValueError as error:
+        raise SystemExit(f"recipe {base}: reward: {error}") from None
+    parser = fit_parser()
+    try:
+        config = parser.parse_args(["--config", yaml.safe_dump(content), *overrides])
+    except Exception as error:  # jsonargparse's error names the key and the allowed values
+        # ...but a class in a missing module reads as a type mismatch of the whole union
+        problem = class_path_problem(content, overrides)
+        raise SystemExit(f"recipe {base}: {problem or error}") from None
+    problems = check_values(config)
+    if problems:
+        raise SystemExit("\n".join(f"recipe {base}: {problem}" for problem in problems))
+    return config, resume_dir, stem
+
+
+def fit(argv: list[str]) -> None:
+    """``qdil fit``: build the run, save its resolved recipe, loop, checkpoint."""
+    help_request = _help_request(argv)
+    if help_request is not None:
+        fit_help(help_request)
+    import yaml
+
+    from qdil.files import atomic_write, remove_stale_temporaries
+    from qdil.qd.checkpoint import (
+        CHECKPOINT,
+        config_differences,
+        load_checkpoint,
+        read_checkpoint,
+    )
+    from qdil.qd.loop import run_qd
+    from qdil.rewards.base import NonFiniteRewardError
+    from qdil.rl.execution import ExecutorError
+
+    config, resume_dir, stem = parse_fit(argv)
+    parser = fit_parser()
+    name = config.name or f"{stem}-seed{config.seed}"
+    if resume_dir is not None:
+        run_dir = resume_dir
+    else:
+        run_dir = Path(config.logging.root) / name
+        if (run_dir / "checkpoints").exists() or (run_dir / "metrics.csv").exists():
+            raise SystemExit(
+                f"run directory {run_dir} already holds a run; continue it (or, without a "
+                f"checkpoint, start it over) with `qdil fit --resume {run_dir}`, or choose "
+                "another --name"
+            )
+    config.name = name
+    resolved = parser.dump(config, skip_unset=False)
+    for path in remove_stale_temporaries(run_dir, run_dir / CHECKPOINT.parent):
+        print(f"removed {path}, left by a killed write", file=sys.stderr)
+    state = None
+    if resume_dir is not None and (run_dir / CHECKPOINT).exists():
+        state = read_checkpoint(run_dir / CHECKPOINT)
+        _check_unchanged(state, yaml.safe_load(resolved), run_dir, config_differences)
+    elif resume_dir is not None:
+        print(
+            f"{run_dir} has no checkpoint (the run stopped before its first one); "
+            f"starting it over from its {CONFIG_NAME}",
+            file=sys.stderr,
+        )
+    fresh = not run_dir.exists()
+    run_dir.mkdir(parents=True, exist_ok=True)
+    try:
+        atomic_write(run_dir / CONFIG_NAME, lambda file: file.write(resolved.encode()))
+        init = parser.instantiate(config)
+        run = build(init, name, run_dir, resolved, resume=state is not None)
+    except BaseException:
+        if fresh:  # a run that never started leaves no directory behind
+            shutil.rmtree(run_dir, ignore_errors=True)
+        raise
+    if state is not None:
+        load_checkpoint(run, state)
+        del state  # the checkpoint's bytes are restored into the run; free them
+        print(f"resuming {run_dir} at iteration {run.state.iteration}", file=sys.stderr)
+    if run.tracker.csv.path.exists():  # rows logged after the checkpoint (all, if none)
+        run.tracker.csv.truncate(run.state.iteration)
+    try:
+        run_qd(run)
+    except NonFiniteRewardError as error:
+        raise SystemExit(
+            f"qdil fit: error: {error}\nAfter the fix, `qdil fit --resume {run_dir}` continues "
+            "the run from its last checkpoint (or starts it over if it has none)."
+        ) from None
+    except ExecutorError as error:  # a worker that could not be replaced: resume later
+        raise SystemExit(
+            f"qdil fit: error: {error}\n`qdil fit --resume {run_dir}` continues the run from "
+            "its last checkpoint (or starts it over if it has none)."
+        ) from None
+    finally:
+        run.vppo.executor.close()
+    run.tracker.finish(run)
+    print(f"run directory: {run_dir}", file=sys.stderr)
+
+
+def _check_unchanged(
+    state: dict[str, Any], resolved: dict[str, Any], run_dir: Path, differences: Any
+) -> None:
+    """Refuse a resume whose recipe differs from the one stored with its checkpoint.
+
+    Raises:
+        SystemExit: naming the keys that differ and what to do.
+    """
+    stored = state.get("config")
+    if stored is None:  # written before checkpoints stored their recipe
+        return
+    changed = differences(stored, resolved)
+    if changed:
+        lines = "\n".join(f"  {line}" for line in changed)
+        raise SystemExit(
+            f"qdil fit: error: {run_dir / CONFIG_NAME} no longer matches the recipe its "
+            f"checkpoint was made with (checkpoint -> now):\n{lines}\n"
+            "Restore these keys to resume, or start a new run from the edited file with "
+            f"`qdil fit {run_dir / CONFIG_NAME} --name NEW_NAME`. Only qd.iterations, "
+            "env.num_threads, executor.* and logging.* may change on resume."
+        )
+
+
+def build(init: Namespace, name: str, run_dir: Path, resolved: str, *, resume: bool) -> Run:
+    """The run of an instantiated recipe (envs, reward model, scheduler, trackers)."""
+    import yaml
+
+    from qdil.run import build_run
+
+    return build_run(
+        name=name,
+        run_dir=run_dir,
+        seed=init.seed,
+        env=init.env,
+        rl=init.rl,
+        reward=init.reward,
+        bonus=init.bonus,
+        demos=init.demos,
+        qd=init.qd,
+        logging=init.logging,
+        config=yaml.safe_load(resolved),
+        resume=resume,
+        executor=init.executor,
+    )

@@ -1,0 +1,103 @@
+"""``qdil eval`` and ``qdil report``: corrected archives, tables, tests and figures."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from qdil.cli.args import at_least, existing_run_dir
+
+
+def evaluate(argv: list[str]) -> None:
+    """``qdil eval``: re-score a run's archive with deterministic episodes on the true reward."""
+    parser = argparse.ArgumentParser(
+        prog="qdil eval",
+        description="Re-evaluate every elite of a run's true-return archive with deterministic "
+        "actions; writes corrected_archive.pkl and eval.json into the run directory.",
+    )
+    parser.add_argument("run_dir", metavar="RUN_DIR", help="a run directory made by qdil fit")
+    parser.add_argument(
+        "--episodes", type=at_least(1), default=5, help="episodes per elite (PPGA: 50)"
+    )
+    parser.add_argument("--batch", type=at_least(1), default=64, help="elites evaluated together")
+    parser.add_argument("--seed", type=at_least(0), default=0, help="reset seed")
+    parser.add_argument(
+        "--num-threads", type=at_least(1), default=None, help="physics threads (default: all)"
+    )
+    args = parser.parse_args(argv)
+    run_dir = existing_run_dir(parser, args.run_dir)
+    from qdil.evaluation.rescore import rescore_archive
+
+    _, summary = rescore_archive(
+        run_dir, args.episodes, args.batch, args.seed, args.num_threads, progress=True
+    )
+    before, after = summary["training_metrics"], summary["metrics"]
+    print(
+        f"{summary['elites_evaluated']} elites x {args.episodes} deterministic episodes "
+        f"({summary['env_steps']:,} env steps)"
+    )
+    print("| metric | training archive | corrected |\n|---|---|---|")
+    for key in ("qd_score", "qd_score_offset", "coverage", "obj_max", "obj_mean", "num_elites"):
+        print(f"| {key} | {before[key]:.6g} | {after[key]:.6g} |")
+
+
+def report(argv: list[str]) -> None:
+    """``qdil report``: the paper's tables, Tukey HSD tests, heatmaps and learning curves."""
+    parser = argparse.ArgumentParser(
+        prog="qdil report",
+        description="Paper-style report of run directories: main table (mean ± std over "
+        "seeds), Tukey HSD on the QD-Score, archive heatmaps, learning curves. Runs that are "
+        "missing or unfinished are listed, not dropped.",
+    )
+    parser.add_argument("paths", nargs="+", metavar="RUN_DIR", help="runs or folders of runs")
+    parser.add_argument("--out", required=True, help="output folder of the report")
+    parser.add_argument(
+        "--label",
+        action="append",
+        default=[],
+        metavar="RUN_DIR=LABEL",
+        help="method label of one run (repeatable); default: reward model [+ -Bonus]",
+    )
+    parser.add_argument(
+        "--reference",
+        metavar="METHOD",
+        help="Tukey table: only pairs with this method, as group2 (the paper's layout)",
+    )
+    parser.add_argument(
+        "--no-records",
+        action="store_true",
+        help="do not keep records of the runs in OUT/runs/ (config, curves, final archive "
+        "without policies: enough to make the report again when the runs are gone)",
+    )
+    args = parser.parse_args(argv)
+    labels = {}
+    for item in args.label:
+        path, sep, label = item.rpartition("=")
+        if not sep or not path or not label:
+            parser.error(f"--label takes RUN_DIR=LABEL, got {item!r}")
+        labels[path] = label
+    from qdil.evaluation.report import write_report
+
+    made = write_report(
+        args.paths,
+        args.out,
+        labels=labels,
+        reference=args.reference,
+        records=not args.no_records,
+    )
+    left_out = [run for run in made.runs if not run.included]
+    unfinished = [run for run in made.runs if run.included and run.unfinished]
+    print(made.main_table or "no run could be included")
+    print(
+        f"\n{len(made.runs) - len(left_out)} run(s) included ({len(unfinished)} unfinished), "
+        f"{len(left_out)} left out"
+    )
+    for run in [run for run in made.runs if run.problems or run.notes]:
+        print(f"  {run.path}: {run.status}: {'; '.join(run.problems + run.notes)}")
+    print(f"report: {Path(args.out) / 'report.md'} (also report.html, tables, figures)")
+    if len(left_out) < len(made.runs):  # at least one run made it into the report
+        return
+    raise SystemExit(
+        "qdil report: error: no run could be included (reasons above); give run directories "
+        "made by qdil fit, or folders holding them"
+    )
