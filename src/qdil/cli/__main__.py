@@ -2,4 +2,5 @@
 
 from qdil.cli import main
 
-main()
+if __name__ == "__main__":  # importing the module (e.g. to check imports) runs nothing
+    main()

@@ -25,7 +25,8 @@ at ℓ = +2 (r ≈ 2.13) and the policy's at ℓ = −2 (r ≈ 0.13) whatever th
 policy's data, ℓ = (D − μ_π)/σ_π, so that a well-separating critic does not flatten the
 differences between policy transitions (:func:`standardized_logit`). Unspecified by the
 paper, chosen here and documented: encoder, decoder and adversary widths (100, 100),
-latent size 8, a Gaussian encoder.
+latent size 32 (8 until 2026-11-25: too small to keep the action, docs/rewards/balance.md),
+a Gaussian encoder.
 """
 
 from __future__ import annotations
