@@ -32,20 +32,21 @@ import yaml
 
 from qdil.demos.io import load_demos
 from qdil.files import CONFIG_NAME
-from qdil.qd.checkpoint import read_checkpoint
+from qdil.qd.checkpoint import CHECKPOINT, read_checkpoint
 
 
-def load_reward(run_dir: Path, sizes: tuple[int, int, int]) -> torch.nn.Module:
-    """The trained reward model of ``run_dir``'s last checkpoint, without the bonus."""
+def load_reward(run_dir: Path, sizes: tuple[int, int, int]) -> tuple[torch.nn.Module, int]:
+    """The reward model of ``run_dir``'s last checkpoint (the bonus left out), and its iteration."""
     config = yaml.safe_load((run_dir / CONFIG_NAME).read_text())["reward"]
     module, _, name = config["class_path"].rpartition(".")
     model = getattr(importlib.import_module(module), name)(*sizes, **config["init_args"])
-    state = read_checkpoint(run_dir / "checkpoints" / "last.pt")["reward"]["state_dict"]
+    checkpoint = read_checkpoint(run_dir / CHECKPOINT)
+    state = checkpoint["reward"]["state_dict"]
     # with the bonus on, the checkpoint holds ExplorationBonus, whose ``model`` is the reward
     if any(key.startswith("model.") for key in state):
         state = {key[6:]: value for key, value in state.items() if key.startswith("model.")}
     model.load_state_dict(state)
-    return model.eval()
+    return model.eval(), checkpoint["iteration"]
 
 
 def main() -> None:
@@ -66,20 +67,23 @@ def main() -> None:
     )
     print("|---|---|---|---|---|---|---|")
     for run_dir in args.runs:
-        model = load_reward(run_dir, sizes)
+        model, iteration = load_reward(run_dir, sizes)
         if not getattr(model, "use_measures", False):
             print(f"| {run_dir} | – | – | does not read δ(s) | | | |")
             continue
-        iteration = read_checkpoint(run_dir / "checkpoints" / "last.pt")["iteration"]
         expert_mean, policy_mean = model.critic_means.tolist()
         spread = float(model.critic_policy_std)
         with torch.no_grad():
             base = model.score(expert)
+            mean = base.mean()
             for i, pattern in enumerate(patterns):
-                flags = torch.tensor(pattern).expand_as(expert.contacts).clone()
-                shift = (model.score(replace(expert, contacts=flags)).mean() - base.mean()) / spread
-                mask = (own == torch.tensor(pattern)).all(1)
-                theirs = (base[mask].mean() - base.mean()) / spread if mask.any() else float("nan")
+                flags = torch.tensor(pattern)
+                shift = (
+                    model.score(replace(expert, contacts=flags.expand_as(own).clone())).mean()
+                    - mean
+                ) / spread
+                mask = (own == flags).all(1)
+                theirs = (base[mask].mean() - mean) / spread if mask.any() else float("nan")
                 head = (
                     f"{run_dir} | {iteration} | {(expert_mean - policy_mean) / spread:.2f}"
                     if i == 0

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import re
 import unicodedata
+from functools import cache
 from pathlib import Path
 
 import pytest
@@ -32,6 +33,7 @@ def slug(heading: str) -> str:
     return "".join(kept).replace(" ", "-")
 
 
+@cache  # a page is parsed once however many links point into it
 def anchors(page: Path) -> set[str]:
     """The anchors of ``page``'s headings, with GitHub's -1, -2 suffixes for repeats."""
     seen: dict[str, int] = {}
