@@ -121,3 +121,31 @@ def test_physics_threads_and_chunks_do_not_change_results() -> None:
     reference = trace(1, 0)
     for threads, chunk_size in [(2, 0), (1, None), (2, None), (2, 1), (2, 3), (2, 64)]:
         np.testing.assert_array_equal(trace(threads, chunk_size), reference)
+
+
+def test_a_reset_inside_the_step_equals_a_reset_then_a_step() -> None:
+    """``MujocoBatch.step(reset=...)`` (NEXT_STEP's one launch) is bit-identical to two calls."""
+    rng = np.random.default_rng(5)
+
+    def batch():
+        env = gym.make_vec("qdil/Walker2d-v5", num_envs=6, num_threads=2)
+        env.reset(seed=1)
+        physics = env.unwrapped.physics
+        for _ in range(5):
+            physics.step(np.full((6, 6), 0.3), 4)
+        return env, physics
+
+    ctrl = rng.uniform(-1, 1, (6, 6))
+    ids = np.array([1, 4])
+    active = np.ones(6, dtype=bool)
+    active[ids] = False
+    env, fused = batch()
+    qpos, qvel = env.unwrapped.draw_initial_states(ids)
+    _, apart = batch()
+    fused.step(ctrl, 4, active, reset=(ids, qpos, qvel))
+    apart.reset(ids, qpos, qvel)
+    apart.step(ctrl, 4, active)
+    np.testing.assert_array_equal(fused.exported, apart.exported)
+    np.testing.assert_array_equal(fused.sensordata, apart.sensordata)
+    with pytest.raises(ValueError, match="also active"):
+        fused.step(ctrl, 4, None, reset=(ids, qpos, qvel))

@@ -75,6 +75,17 @@ def _copy_out(i, sources, lengths, offsets, out):  # pragma: no cover - numba
         _mju_copy(base + offsets[f] * 8, sources[f, i], lengths[f])
 
 
+@njit(nogil=True)
+def _reset_one(model, data, qpos_ptr, qvel_ptr, qpos, qvel, j):  # pragma: no cover - numba
+    """Exactly gymnasium's MujocoEnv.reset + set_state: reset, write row j's state, forward."""
+    nq = qpos.shape[1]
+    nv = qvel.shape[1]
+    _mj_reset_data(model, data)
+    _mju_copy(qpos_ptr, qpos.ctypes.data + j * nq * 8, nq)
+    _mju_copy(qvel_ptr, qvel.ctypes.data + j * nv * 8, nv)
+    _mj_forward(model, data)
+
+
 @njit(nogil=True, parallel=True)
 def _step_kernel(
     model,
@@ -90,10 +101,21 @@ def _step_kernel(
     out,
     sensor_ptrs,
     sensors,
+    reset_rows,
+    qpos_ptrs,
+    qvel_ptrs,
+    qpos,
+    qvel,
 ):  # pragma: no cover - numba
     nu = ctrl.shape[1]
     nsensor = sensors.shape[1]
     for i in prange(datas.shape[0]):
+        if reset_rows[i] >= 0:  # a reset in the same parallel region saves a second launch
+            _reset_one(model, datas[i], qpos_ptrs[i], qvel_ptrs[i], qpos, qvel, reset_rows[i])
+            _copy_out(i, sources, lengths, offsets, out)
+            if nsensor > 0:
+                _mju_copy(sensors.ctypes.data + i * nsensor * 8, sensor_ptrs[i], nsensor)
+            continue
         if not active[i]:
             continue
         data = datas[i]
@@ -126,17 +148,10 @@ def _reset_kernel(
     sensor_ptrs,
     sensors,
 ):  # pragma: no cover - numba
-    nq = qpos.shape[1]
-    nv = qvel.shape[1]
     nsensor = sensors.shape[1]
     for j in prange(ids.shape[0]):
         i = ids[j]
-        data = datas[i]
-        # Exactly gymnasium's MujocoEnv.reset + set_state: reset, write the state, forward.
-        _mj_reset_data(model, data)
-        _mju_copy(qpos_ptrs[i], qpos.ctypes.data + j * nq * 8, nq)
-        _mju_copy(qvel_ptrs[i], qvel.ctypes.data + j * nv * 8, nv)
-        _mj_forward(model, data)
+        _reset_one(model, datas[i], qpos_ptrs[i], qvel_ptrs[i], qpos, qvel, j)
         _copy_out(i, sources, lengths, offsets, out)
         if nsensor > 0:
             _mju_copy(sensors.ctypes.data + i * nsensor * 8, sensor_ptrs[i], nsensor)
@@ -269,6 +284,11 @@ class MujocoBatch:
         self.exported = np.zeros((num_sims, width))
         self.sensordata = np.zeros((num_sims, model.nsensordata))
         self._all = np.ones(num_sims, dtype=np.bool_)
+        self._no_reset = (
+            np.full(num_sims, -1, dtype=np.int64),
+            np.zeros((0, model.nq)),
+            np.zeros((0, model.nv)),
+        )
 
     def _pointers(self, field: str) -> np.ndarray:
         return np.array([getattr(d, field).ctypes.data for d in self.datas], dtype=np.int64)
@@ -277,14 +297,33 @@ class MujocoBatch:
         """The (N, length) columns of :attr:`exported` that hold export ``name``."""
         return self.exported[:, self._slices[name]]
 
-    def step(self, ctrl: np.ndarray, nstep: int, active: np.ndarray | None = None) -> None:
+    def step(
+        self,
+        ctrl: np.ndarray,
+        nstep: int,
+        active: np.ndarray | None = None,
+        reset: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+    ) -> None:
         """Set controls and advance the active simulations by ``nstep`` substeps.
 
         Args:
             ctrl: (N, nu) float64 C-contiguous controls.
             nstep: number of ``mj_step`` calls (the task's frame skip).
             active: (N,) bool mask of simulations to step; ``None`` for all.
+            reset: ``(ids, qpos, qvel)`` as :meth:`reset` takes them: simulations to reset
+                in the same call instead of stepping (they must not be active). Same result
+                as :meth:`reset` then :meth:`step`, in one parallel region.
         """
+        rows, qpos, qvel = self._no_reset
+        if reset is not None and len(reset[0]):
+            ids, qpos, qvel = reset
+            ids = np.asarray(ids, dtype=np.int64)
+            if active is None or np.asarray(active)[ids].any():
+                raise ValueError("step(reset=...) resets simulations that are also active")
+            rows = np.full(self.num_sims, -1, dtype=np.int64)
+            rows[ids] = np.arange(ids.size)
+            qpos = np.ascontiguousarray(qpos, dtype=np.float64)
+            qvel = np.ascontiguousarray(qvel, dtype=np.float64)
         numba.set_num_threads(self.num_threads)
         with numba.parallel_chunksize(self.chunk_size):
             _step_kernel(
@@ -301,6 +340,11 @@ class MujocoBatch:
                 self.exported,
                 self._sensor_ptrs,
                 self.sensordata,
+                rows,
+                self._qpos_ptrs,
+                self._qvel_ptrs,
+                qpos,
+                qvel,
             )
 
     def reset(self, ids: np.ndarray, qpos: np.ndarray, qvel: np.ndarray) -> None:

@@ -177,9 +177,10 @@ class LocomotionVectorEnv(VectorEnv):
         """
         if self._rngs is None:
             raise RuntimeError("seed the generators (reset or seed_generators) first")
-        states = [self.task.reset_noise(self._rngs[i]) for i in ids]
-        qpos = np.stack([q for q, _ in states])
-        qvel = np.stack([v for _, v in states])
+        qpos = np.empty((len(ids), self.model.nq))
+        qvel = np.empty((len(ids), self.model.nv))
+        for row, i in enumerate(ids):  # filled in place: this runs on most steps of a batch
+            qpos[row], qvel[row] = self.task.reset_noise(self._rngs[i])
         return qpos, qvel
 
     def _reset_envs(self, ids: np.ndarray) -> None:
@@ -187,6 +188,10 @@ class LocomotionVectorEnv(VectorEnv):
         qpos, qvel = self.draw_initial_states(ids)
         self.physics.reset(ids, qpos, qvel)
         self._position[ids] = self.task.position(self._arrays())[ids]
+        self._reset_stats(ids)
+
+    def _reset_stats(self, ids: np.ndarray) -> None:
+        """Zero the episode statistics of sub-environments ``ids`` (their physics is reset)."""
         self._elapsed[ids] = 0
         self._return[ids] = 0.0
         self._contact_sum[ids] = 0.0
@@ -199,11 +204,10 @@ class LocomotionVectorEnv(VectorEnv):
             raise ValueError(
                 f"actions must have shape (num_envs, action_dim) = {expected}, got {actions.shape}"
             )
-        if not np.issubdtype(actions.dtype, np.floating):
+        if actions.dtype.kind != "f":
             raise ValueError(f"actions must be a float32 or float64 array, got {actions.dtype}")
-        finite = np.isfinite(actions).all(axis=1)
-        if not finite.all():
-            bad = np.flatnonzero(~finite)
+        if not np.isfinite(actions).all():
+            bad = np.flatnonzero(~np.isfinite(actions).all(axis=1))
             raise ValueError(
                 f"actions contain NaN or inf for sub-environments {bad[:10].tolist()}; "
                 "check the policy's outputs"
@@ -280,12 +284,19 @@ class LocomotionVectorEnv(VectorEnv):
                 )
             resetting = np.zeros_like(resetting)
         self._ctrl[:] = actions
-        self.physics.step(self._ctrl, self.task.frame_skip, stepping)
+        # NEXT_STEP resets ride along in the step's parallel region (one launch, and the
+        # arrays below already hold the reset states, as a separate reset would leave them)
+        reset_ids = np.flatnonzero(resetting)
+        reset = (reset_ids, *self.draw_initial_states(reset_ids)) if reset_ids.size else None
+        self.physics.step(self._ctrl, self.task.frame_skip, stepping, reset=reset)
         x = self._arrays()
 
         position = self.task.position(x)
         velocity = (position - self._position) / self.task.dt
         self._position[stepping] = position[stepping]
+        if reset is not None:
+            self._position[reset_ids] = position[reset_ids]
+            self._reset_stats(reset_ids)
         reward, terms = self.task.reward(velocity, actions, x)
         terminated = self.task.terminated(x) & stepping
         self._elapsed[stepping] += 1
@@ -319,10 +330,6 @@ class LocomotionVectorEnv(VectorEnv):
             }
             info["_episode"] = done
 
-        if resetting.any():  # NEXT_STEP: these sub-environments reset now
-            self._reset_envs(np.flatnonzero(resetting))
-            obs[resetting] = self.task.observation(self._arrays())[resetting]
-            contacts[resetting] = self._contacts()[resetting]
         if self.autoreset_mode is AutoresetMode.SAME_STEP and done.any():
             final_info = {key: value for key, value in info.items() if key != "episode"}
             final_info["foot_contact"] = contacts.copy()

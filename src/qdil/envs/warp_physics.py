@@ -173,14 +173,28 @@ class WarpBatch:
         """The (N, length) columns of :attr:`exported` that hold export ``name``."""
         return self.exported[:, self._slices[name]]
 
-    def step(self, ctrl: np.ndarray, nstep: int, active: np.ndarray | None = None) -> None:
+    def step(
+        self,
+        ctrl: np.ndarray,
+        nstep: int,
+        active: np.ndarray | None = None,
+        reset: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+    ) -> None:
         """Set controls and advance the active simulations by ``nstep`` substeps.
 
         Args:
             ctrl: (N, nu) controls.
             nstep: number of ``step`` calls (the task's frame skip).
             active: (N,) bool mask of simulations to step; ``None`` for all.
+            reset: ``(ids, qpos, qvel)`` as :meth:`reset` takes them: simulations to reset
+                instead of stepping (they must not be active); reset first, then stepped
+                with the others held, as :class:`~qdil.envs.physics.MujocoBatch` does.
         """
+        if reset is not None and len(reset[0]):
+            ids = np.asarray(reset[0], dtype=np.int64)
+            if active is None or np.asarray(active)[ids].any():
+                raise ValueError("step(reset=...) resets simulations that are also active")
+            self.reset(*reset)
         keep = None if active is None or np.all(active) else ~np.asarray(active, dtype=bool)
         ctrl_t = torch.as_tensor(ctrl, dtype=torch.float32).to(self.torch_device)
         mask = None if keep is None else torch.from_numpy(~keep).to(self.torch_device)
