@@ -4,7 +4,8 @@
 (:class:`~qdil.envs.physics.MujocoBatch`, the default, bit-identical to gymnasium);
 ``warp`` is MuJoCo Warp on a GPU or on Warp's CPU device
 (:class:`~qdil.envs.warp_physics.WarpBatch`, float32, agrees within a tolerance). Both
-offer the same ``exported`` / ``sensordata`` arrays, ``view``, ``step`` and ``reset``.
+offer the same ``exported`` / ``sensordata`` arrays, ``view``, ``step`` (with an optional
+``reset=(ids, qpos, qvel)`` of simulations that reset instead of stepping) and ``reset``.
 """
 
 from __future__ import annotations
