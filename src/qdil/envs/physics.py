@@ -201,6 +201,22 @@ def export_slices(bounds: list[tuple[str, int, int]], names: list[str]) -> dict[
     return slices
 
 
+def reset_ids(
+    reset: tuple[np.ndarray, np.ndarray, np.ndarray] | None, active: np.ndarray | None
+) -> np.ndarray | None:
+    """The (n,) int64 ids of a step's ``reset=(ids, qpos, qvel)``, or ``None`` if it has none.
+
+    Raises:
+        ValueError: if a simulation to reset is also active in the step.
+    """
+    if reset is None or not len(reset[0]):
+        return None
+    ids = np.asarray(reset[0], dtype=np.int64)
+    if active is None or np.asarray(active)[ids].any():
+        raise ValueError("step(reset=...) resets simulations that are also active")
+    return ids
+
+
 # chunks of simulations per physics thread in a step (docs/benchmarks.md, "Environments")
 CHUNKS_PER_THREAD = 8
 
@@ -315,11 +331,9 @@ class MujocoBatch:
                 as :meth:`reset` then :meth:`step`, in one parallel region.
         """
         rows, qpos, qvel = self._no_reset
-        if reset is not None and len(reset[0]):
-            ids, qpos, qvel = reset
-            ids = np.asarray(ids, dtype=np.int64)
-            if active is None or np.asarray(active)[ids].any():
-                raise ValueError("step(reset=...) resets simulations that are also active")
+        ids = reset_ids(reset, active)
+        if ids is not None:
+            _, qpos, qvel = reset
             rows = np.full(self.num_sims, -1, dtype=np.int64)
             rows[ids] = np.arange(ids.size)
             qpos = np.ascontiguousarray(qpos, dtype=np.float64)

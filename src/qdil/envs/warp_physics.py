@@ -33,7 +33,7 @@ import mujoco
 import numpy as np
 import torch
 
-from qdil.envs.physics import Export, export_bounds, export_slices
+from qdil.envs.physics import Export, export_bounds, export_slices, reset_ids
 
 
 def import_warp() -> tuple[Any, Any]:
@@ -190,10 +190,7 @@ class WarpBatch:
                 instead of stepping (they must not be active); reset first, then stepped
                 with the others held, as :class:`~qdil.envs.physics.MujocoBatch` does.
         """
-        if reset is not None and len(reset[0]):
-            ids = np.asarray(reset[0], dtype=np.int64)
-            if active is None or np.asarray(active)[ids].any():
-                raise ValueError("step(reset=...) resets simulations that are also active")
+        if reset_ids(reset, active) is not None:
             self.reset(*reset)
         keep = None if active is None or np.all(active) else ~np.asarray(active, dtype=bool)
         ctrl_t = torch.as_tensor(ctrl, dtype=torch.float32).to(self.torch_device)
