@@ -132,31 +132,6 @@ def _step_kernel(
             _mju_copy(sensors.ctypes.data + i * nsensor * 8, sensor_ptrs[i], nsensor)
 
 
-@njit(nogil=True, parallel=True)
-def _reset_kernel(
-    model,
-    datas,
-    ids,
-    qpos_ptrs,
-    qvel_ptrs,
-    qpos,
-    qvel,
-    sources,
-    lengths,
-    offsets,
-    out,
-    sensor_ptrs,
-    sensors,
-):  # pragma: no cover - numba
-    nsensor = sensors.shape[1]
-    for j in prange(ids.shape[0]):
-        i = ids[j]
-        _reset_one(model, datas[i], qpos_ptrs[i], qvel_ptrs[i], qpos, qvel, j)
-        _copy_out(i, sources, lengths, offsets, out)
-        if nsensor > 0:
-            _mju_copy(sensors.ctypes.data + i * nsensor * 8, sensor_ptrs[i], nsensor)
-
-
 @dataclass(frozen=True)
 class Export:
     """A slice of a flat ``MjData`` field copied out after every step and reset.
@@ -300,6 +275,8 @@ class MujocoBatch:
         self.exported = np.zeros((num_sims, width))
         self.sensordata = np.zeros((num_sims, model.nsensordata))
         self._all = np.ones(num_sims, dtype=np.bool_)
+        self._none = np.zeros(num_sims, dtype=np.bool_)
+        self._idle_ctrl = np.zeros((num_sims, model.nu))
         self._no_reset = (
             np.full(num_sims, -1, dtype=np.int64),
             np.zeros((0, model.nq)),
@@ -369,22 +346,8 @@ class MujocoBatch:
             qpos: (n, nq) float64 positions.
             qvel: (n, nv) float64 velocities.
         """
-        numba.set_num_threads(self.num_threads)
-        _reset_kernel(
-            self._model_ptr,
-            self._data_ptrs,
-            np.ascontiguousarray(ids, dtype=np.int64),
-            self._qpos_ptrs,
-            self._qvel_ptrs,
-            np.ascontiguousarray(qpos, dtype=np.float64),
-            np.ascontiguousarray(qvel, dtype=np.float64),
-            self._sources,
-            self._lengths,
-            self._offsets,
-            self.exported,
-            self._sensor_ptrs,
-            self.sensordata,
-        )
+        # the step kernel with no simulation stepping: one kernel serves both
+        self.step(self._idle_ctrl, 0, self._none, reset=(ids, qpos, qvel))
 
 
 def add_contact_sensors(spec: mujoco.MjSpec, geoms: Sequence[str], floor: str) -> None:
