@@ -161,6 +161,10 @@ class LoggingConfig:
     Attributes:
         root: parent folder of run directories.
         checkpoint_every: save a checkpoint every K iterations (and at the end).
+        checkpoint_minutes: also save one at the end of the first iteration that ends this
+            many minutes of wall time after the last save (or the start), so that a run
+            killed early or between distant checkpoints loses little; 0 saves by iteration
+            count only.
         progress: show a progress bar.
         wandb: ``offline`` (default; no network, sync later with ``wandb sync``),
             ``online``, or ``disabled``.
@@ -170,6 +174,7 @@ class LoggingConfig:
 
     root: str = "runs"
     checkpoint_every: int = 10
+    checkpoint_minutes: float = 30.0
     progress: bool = True
     wandb: Literal["offline", "online", "disabled"] = "offline"
     wandb_project: str = "qdil"

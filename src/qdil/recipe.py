@@ -28,8 +28,9 @@ from qdil.rl.vppo import VPPO
 # The smallest value of every integer key that has one. jsonargparse checks the types; these
 # limits are checked after parsing so that a message can name the key and how to set it
 # (0 iterations would leave a directory with only config.yaml, 0 cells an unusable archive,
-# checkpoint_every 0 a ZeroDivisionError after the first iteration).
-MINIMUMS: dict[str, int] = {
+# checkpoint_every 0 a ZeroDivisionError after the first iteration; a negative
+# checkpoint_minutes would save after every iteration).
+MINIMUMS: dict[str, float] = {
     "seed": 0,
     "env.num_envs": 1,
     "env.eval_envs": 1,
@@ -42,6 +43,7 @@ MINIMUMS: dict[str, int] = {
     "bonus.cells": 1,
     "demos.num_episodes": 1,
     "logging.checkpoint_every": 1,
+    "logging.checkpoint_minutes": 0,
     "logging.heatmap_every": 0,
 }
 
@@ -94,7 +96,7 @@ def check_values(config: Namespace) -> list[str]:
     problems = []
     for key, low in MINIMUMS.items():
         value = config.get(key)
-        if isinstance(value, int) and not isinstance(value, bool) and value < low:
+        if isinstance(value, int | float) and not isinstance(value, bool) and value < low:
             problems.append(
                 f"{key} must be at least {low}, got {value}; set it in the recipe or with --{key} N"
             )

@@ -156,3 +156,36 @@ def test_keys_added_later_resume_when_a_checkpoint_lacks_them_at_their_implicit_
     assert config_differences(bonus, current) == []
     current["bonus"]["type"] = "ebc"
     assert config_differences(bonus, current) == ["bonus.type: 'single_step' -> 'ebc'"]
+
+
+def test_checkpoint_minutes_saves_between_distant_iteration_checkpoints(
+    tmp_path: Path, monkeypatch
+) -> None:
+    """With checkpoint_every far away, the wall-clock rule saves after every long iteration."""
+    import qdil.qd.loop as loop
+
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("WANDB_MODE", "disabled")
+    saved: list[int] = []
+    real_save = loop.save_checkpoint
+
+    def recording_save(run):
+        saved.append(run.state.iteration)
+        return real_save(run)
+
+    monkeypatch.setattr(loop, "save_checkpoint", recording_save)
+    args = ["--qd.iterations", "2", "--logging.checkpoint_every", "100"]
+    main(["fit", str(SMOKE), *args, "--logging.checkpoint_minutes", "1e-9", "--name", "often"])
+    assert saved == [1, 2]
+    saved.clear()
+    main(["fit", str(SMOKE), *args, "--logging.checkpoint_minutes", "0", "--name", "at_end"])
+    assert saved == [2], "checkpoint_minutes 0 must save by iteration count only"
+
+
+def test_a_negative_checkpoint_minutes_is_refused_by_name(tmp_path: Path, monkeypatch) -> None:
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(SystemExit) as refused:
+        main(["fit", str(SMOKE), "--logging.checkpoint_minutes", "-1"])
+    message = str(refused.value.code)
+    assert "logging.checkpoint_minutes must be at least 0, got -1.0" in message, message
+    assert not Path("runs").exists(), "a refused recipe must not leave a run directory"

@@ -218,17 +218,31 @@ def qd_iteration(run: Run) -> dict[str, float]:
     return metrics
 
 
+def _checkpoint_due(run: Run, seconds_since_save: float) -> bool:
+    """Whether the iteration just finished ends with a checkpoint.
+
+    Every ``checkpoint_every`` iterations, at the last one, and, when
+    ``checkpoint_minutes`` is positive, once that much wall time passed since the last save.
+    """
+    iteration, logging = run.state.iteration, run.logging
+    if iteration % logging.checkpoint_every == 0 or iteration == run.qd.iterations:
+        return True
+    minutes = logging.checkpoint_minutes
+    return minutes > 0 and seconds_since_save >= 60.0 * minutes
+
+
 def run_qd(run: Run) -> None:
     """Run iterations until ``qd.iterations``, logging and checkpointing as configured."""
     progress = run.tracker.progress(run.state.iteration, run.qd.iterations)
+    saved = time.monotonic()
     try:
         while run.state.iteration < run.qd.iterations:
             run.state.iteration += 1
             metrics = qd_iteration(run)
             run.tracker.log(metrics, run.state.iteration, run)
             progress.update(metrics)
-            every = run.logging.checkpoint_every
-            if run.state.iteration % every == 0 or run.state.iteration == run.qd.iterations:
+            if _checkpoint_due(run, time.monotonic() - saved):
                 save_checkpoint(run)
+                saved = time.monotonic()
     finally:
         progress.close()
