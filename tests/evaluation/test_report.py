@@ -22,6 +22,7 @@ from ribs.archives import GridArchive
 from scipy.stats import tukey_hsd
 
 from qdil.evaluation import document as doc
+from qdil.evaluation.profiles import archive_profile, method_profile, profile_levels
 from qdil.evaluation.report import (
     colour_range,
     format_pvalue,
@@ -216,6 +217,42 @@ def test_colour_range_spans_every_archive() -> None:
     assert colour_range([empty]) == (None, None)
 
 
+def small_archive(objectives: list[float]) -> GridArchive:
+    """A 4 × 4 archive (16 cells) holding one elite of each objective, in distinct cells."""
+    archive = GridArchive(solution_dim=1, dims=[4, 4], ranges=[(0, 1), (0, 1)])
+    if objectives:
+        cells = np.array([[0.1, 0.1], [0.4, 0.1], [0.6, 0.4], [0.9, 0.9]])[: len(objectives)]
+        archive.add(np.zeros((len(objectives), 1)), np.array(objectives), cells)
+    return archive
+
+
+def test_return_profile_counts_cells_at_or_above_each_return() -> None:
+    archive = small_archive([1.0, -4.0, 9.0])
+    thresholds = np.array([-10.0, -4.0, 0.0, 1.0, 5.0, 9.0, 10.0])
+    expected = np.array([3, 3, 2, 2, 1, 1, 0]) / 16 * 100
+    np.testing.assert_allclose(archive_profile(archive, thresholds), expected)
+    np.testing.assert_array_equal(archive_profile(small_archive([]), thresholds), np.zeros(7))
+
+
+def test_method_profile_is_the_mean_and_sample_std_over_seeds() -> None:
+    runs = [
+        SimpleNamespace(archive=small_archive(objectives))
+        for objectives in ([1.0, 2.0, 3.0, 4.0], [2.0], [])
+    ]
+    mean, std = method_profile(runs, np.array([0.0, 2.0, 5.0]))
+    shares = np.array([[4, 3, 0], [1, 1, 0], [0, 0, 0]]) / 16 * 100
+    np.testing.assert_allclose(mean, shares.mean(axis=0))
+    np.testing.assert_allclose(std, shares.std(axis=0, ddof=1))
+    one_mean, one_std = method_profile(runs[:1], np.array([0.0]))
+    assert one_mean.tolist() == [25.0] and one_std.tolist() == [0.0]
+
+
+def test_profile_levels_are_fractions_of_the_best_return_in_two_digits() -> None:
+    runs = {"A": [SimpleNamespace(archive=small_archive([5815.4, 100.0]))], "B": []}
+    assert profile_levels(runs) == [1500.0, 2900.0, 4400.0]
+    assert profile_levels({"A": [SimpleNamespace(archive=small_archive([]))]}) == []
+
+
 def test_html_converts_bold_code_and_images() -> None:
     blocks = [doc.table(["a"], [["**0.01** `x` ![h](heatmaps/a.png) <b>"]])]
     page = doc.to_html(blocks, "t")
@@ -371,6 +408,27 @@ def test_table_csv_is_mean_and_sample_std_of_the_runs(made: SimpleNamespace) -> 
             assert float(row[f"{key}_mean"]) == pytest.approx(statistics.mean(values))
             std = statistics.stdev(values) if len(values) > 1 else 0.0
             assert float(row[f"{key}_std"]) == pytest.approx(std, abs=1e-12)
+
+
+def test_profile_csv_counts_the_final_archives_elites(made: SimpleNamespace) -> None:
+    runs = [r for r in collect_runs([made.runs]) if r.included]
+    rows = read_csv(made.out / "profile.csv")
+    assert {r["method"] for r in rows} == {"PPGA-trueReward", "AIRL-Bonus", "GIRIL"}
+    assert len({r["return_at_least"] for r in rows}) == 3
+    for row in rows:
+        level = float(row["return_at_least"])
+        shares = [
+            100 * np.count_nonzero(r.archive.data("objective") >= level) / r.archive.cells
+            for r in runs
+            if r.method == row["method"]
+        ]
+        assert int(row["n"]) == len(shares)
+        assert float(row["cells_pct_mean"]) == pytest.approx(statistics.mean(shares))
+    png = made.out / "profiles" / "Walker2d-v5.png"
+    assert png.read_bytes().startswith(PNG_MAGIC)
+    report = (made.out / "report.md").read_text()
+    assert "## Return profiles of the final archives" in report
+    assert "](profiles/Walker2d-v5.png)" in report and "| Method | n | cells ≥ " in report
 
 
 def test_tukey_csv_equals_scipy_on_the_run_values(made: SimpleNamespace) -> None:

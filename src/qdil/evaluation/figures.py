@@ -1,7 +1,8 @@
-"""The report's figures: a heatmap of every run's final archive and learning curves per task.
+"""The report's figures: archive heatmaps, learning curves and return profiles.
 
 Every archive of a task shares one colour scale; curves are the mean over a method's seeds
-with a ±std band, on the iterations all of its seeds logged (``metrics.csv``).
+with a ±std band, on the iterations all of its seeds logged (``metrics.csv``); return
+profiles (:mod:`qdil.evaluation.profiles`) likewise, on one return axis per task.
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ from pathlib import Path
 import numpy as np
 from ribs.archives import GridArchive
 
+from qdil.evaluation.profiles import method_profile, profile_thresholds
 from qdil.evaluation.runs import (
     Groups,
     RunResult,
@@ -112,4 +114,37 @@ def plot_curves(groups: Groups, out: Path) -> dict[str, list[tuple[str, str]]]:
             figure.savefig(out / name, dpi=100)
             plt.close(figure)
             made.setdefault(task, []).append((label, name))
+    return made
+
+
+def plot_profiles(groups: Groups, out: Path) -> dict[str, str]:
+    """Save the return profile of every task's final archives (one PNG per task).
+
+    Returns:
+        Task -> PNG path relative to ``out`` (tasks whose archives are all empty have none).
+    """
+    import matplotlib.pyplot as plt
+
+    from qdil.evaluation.plots import learning_curves
+
+    (out / "profiles").mkdir(parents=True, exist_ok=True)
+    made: dict[str, str] = {}
+    for task, runs_by_method in groups.items():
+        thresholds = profile_thresholds(runs_by_method)
+        if not len(thresholds):
+            continue
+        lines = {
+            method: (thresholds, *method_profile(runs, thresholds), len(runs))
+            for method, runs in runs_by_method.items()
+        }
+        figure = learning_curves(
+            lines,
+            title=f"{task}: return profile of the final archives",
+            ylabel="cells whose elite returns ≥ x (%)",
+            xlabel="return x",
+        )
+        name = f"profiles/{_slug(task)}.png"
+        figure.savefig(out / name, dpi=100)
+        plt.close(figure)
+        made[task] = name
     return made

@@ -1,8 +1,8 @@
 """The report page: :class:`Report` (what ``write_report`` made) and its document blocks.
 
 :func:`build_document` lays out ``report.md`` / ``report.html``: the main and offset tables,
-the sources of the metrics, the Tukey table, learning curves, heatmaps, the run list and the
-runs left out or unfinished.
+the sources of the metrics, the Tukey table, the return profiles of the final archives,
+learning curves, heatmaps, the run list and the runs left out or unfinished.
 """
 
 from __future__ import annotations
@@ -13,6 +13,7 @@ from pathlib import Path
 
 from qdil.evaluation import document as doc
 from qdil.evaluation.figures import colour_range
+from qdil.evaluation.profiles import profile_table
 from qdil.evaluation.runs import (
     Groups,
     RunResult,
@@ -81,9 +82,19 @@ def _sources(groups: Groups) -> list[str]:
 
 
 def build_document(
-    report: Report, heatmaps: Mapping[Path, str], curves: Mapping[str, list[tuple[str, str]]]
+    report: Report,
+    heatmaps: Mapping[Path, str],
+    curves: Mapping[str, list[tuple[str, str]]],
+    profiles: Mapping[str, str] | None = None,
 ) -> list[doc.Block]:
-    """The blocks of ``report.md`` / ``report.html``."""
+    """The blocks of ``report.md`` / ``report.html``.
+
+    Args:
+        report: what :func:`~qdil.evaluation.report.write_report` collected.
+        heatmaps: run directory -> heatmap PNG.
+        curves: task -> ``(metric label, PNG)`` pairs of the learning curves.
+        profiles: task -> return-profile PNG; ``None`` leaves the section out.
+    """
     runs, groups = report.runs, report.groups
     included = [r for r in runs if r.included]
     blocks = [
@@ -116,6 +127,8 @@ def build_document(
     blocks += [doc.table(header, rows)] if rows else [doc.text("No pair could be tested.")]
     notes = [f"{task}: {note}" for task, res in report.tukey.items() for note in res.notes]
     blocks += [doc.bullets(notes)] if notes else []
+    if profiles is not None and groups:
+        blocks += _profile_blocks(groups, profiles)
     blocks += [doc.heading("Learning curves")]
     blocks += [
         doc.text(
@@ -139,6 +152,24 @@ def build_document(
     problems = _problem_rows(runs)
     header = ["run", "status", "reason"]
     blocks += [doc.table(header, problems)] if problems else [doc.text("None.")]
+    return blocks
+
+
+def _profile_blocks(groups: Groups, profiles: Mapping[str, str]) -> list[doc.Block]:
+    blocks = [doc.heading("Return profiles of the final archives")]
+    blocks += [
+        doc.text(
+            "The percentage of all cells of the grid whose elite returns at least x, from the "
+            "same archives as the main table: at the lowest return it is the coverage, and a "
+            "method above another at high x holds more cells with good policies. Mean over "
+            "seeds (± sample std); the table reads the curves at a quarter, half and three "
+            "quarters of the task's best return."
+        )
+    ]
+    for task in groups:
+        blocks += [doc.heading(task, 3), doc.table(*profile_table(groups, task))]
+        if task in profiles:
+            blocks += [doc.image(profiles[task], f"{task} return profile")]
     return blocks
 
 

@@ -48,22 +48,25 @@ def learning_curves(
     curves: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray, int]],
     title: str = "",
     ylabel: str = "",
+    xlabel: str = "iteration",
 ) -> Figure:
     """Mean over seeds with a shaded ±std band, one line per method.
 
     Args:
-        curves: method -> ``(iterations, mean, std, n_seeds)``; the arrays have shape
+        curves: method -> ``(x, mean, std, n_seeds)``; the arrays have shape
             ``(T_method,)`` (see :func:`qdil.evaluation.stats.align_curves`).
         title: axes title.
         ylabel: y-axis label.
+        xlabel: x-axis label; the axis has integer ticks when it is ``"iteration"``.
     """
     figure, ax = plt.subplots(figsize=(5.5, 3.8))
     for method, (steps, mean, std, n) in curves.items():
         (line,) = ax.plot(steps, mean, label=f"{method} (n={n})", linewidth=1.5)
         if n > 1:
             ax.fill_between(steps, mean - std, mean + std, color=line.get_color(), alpha=0.2)
-    ax.set_xlabel("iteration")
-    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+    ax.set_xlabel(xlabel)
+    if xlabel == "iteration":
+        ax.xaxis.set_major_locator(MaxNLocator(integer=True))
     ax.set_ylabel(ylabel)
     ax.set_title(title, fontsize=9)
     ax.grid(alpha=0.3)

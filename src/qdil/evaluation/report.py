@@ -25,8 +25,9 @@ QD-Score (PPGA's convention, :data:`qdil.qd.archives.QD_OFFSETS`).
 
 Files written into the output folder: ``report.md`` and ``report.html`` (everything on one
 page), ``table.md`` / ``table.csv`` (main table), ``tukey.md`` / ``tukey.csv``,
-``runs.csv`` (every run, its status and final metrics), ``heatmaps/*.png``,
-``curves/*.png`` and ``runs/`` (a record of every included run, :mod:`qdil.evaluation.records`:
+``runs.csv`` (every run, its status and final metrics), ``profile.csv`` (the return
+profiles' table, :mod:`qdil.evaluation.profiles`), ``heatmaps/*.png``, ``curves/*.png``,
+``profiles/*.png`` and ``runs/`` (a record of every included run, :mod:`qdil.evaluation.records`:
 the report can be made again from them when the run directories are gone).
 
 The pieces: :mod:`qdil.evaluation.tables` (numbers), :mod:`qdil.evaluation.figures`
@@ -46,8 +47,10 @@ from qdil.evaluation.figures import (
     method_curves,
     plot_curves,
     plot_heatmaps,
+    plot_profiles,
 )
 from qdil.evaluation.page import Report, build_document
+from qdil.evaluation.profiles import profile_records
 from qdil.evaluation.records import Record, write_record
 from qdil.evaluation.runs import (
     RunResult,
@@ -124,7 +127,8 @@ def write_report(
     report = Report(out, runs, groups, results, table_md, [])
     heatmaps = plot_heatmaps(groups, out)
     curves = plot_curves(groups, out)
-    _write_files(report, heatmaps, curves)
+    profiles = plot_profiles(groups, out)
+    _write_files(report, heatmaps, curves, profiles)
     if records:
         report.files += keep_records(runs, out / "runs")
     return report
@@ -157,7 +161,10 @@ def keep_records(runs: Iterable[RunResult], folder: Path) -> list[str]:
 
 
 def _write_files(
-    report: Report, heatmaps: Mapping[Path, str], curves: Mapping[str, list[tuple[str, str]]]
+    report: Report,
+    heatmaps: Mapping[Path, str],
+    curves: Mapping[str, list[tuple[str, str]]],
+    profiles: Mapping[str, str],
 ) -> None:
     out, groups = report.out, report.groups
     table_md = report.main_table + "\n\n" + doc.markdown_table(*offset_table(groups)) + "\n"
@@ -173,10 +180,12 @@ def _write_files(
     write_csv(out / "tukey.csv", tukey_records(report.tukey), [*fields, "pvalue", "significant"])
     run_rows = run_records(report.runs)
     write_csv(out / "runs.csv", run_rows, list(run_rows[0]) if run_rows else ["path"])
-    blocks = build_document(report, heatmaps, curves)
+    profile_fields = ["task", "method", "return_at_least", "cells_pct_mean", "cells_pct_std", "n"]
+    write_csv(out / "profile.csv", profile_records(groups), profile_fields)
+    blocks = build_document(report, heatmaps, curves, profiles)
     (out / "report.md").write_text(doc.to_markdown(blocks))
     (out / "report.html").write_text(doc.to_html(blocks, "qdil report"))
     written = ["report.md", "report.html", "table.md", "table.csv", "tukey.md", "tukey.csv"]
-    written += ["runs.csv", *heatmaps.values()]
+    written += ["runs.csv", "profile.csv", *heatmaps.values(), *profiles.values()]
     written += [path for images in curves.values() for _, path in images]
     report.files = written
