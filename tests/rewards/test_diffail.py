@@ -145,6 +145,16 @@ def test_mish_is_torchs_mish_with_a_finite_second_derivative() -> None:
     assert torch.isfinite(curvature).all()  # torch's fused Mish gives NaN above ~89
 
 
+def test_mish_and_its_slope_equal_torchs_over_the_range_activations_take() -> None:
+    x = torch.linspace(-60.0, 60.0, 12001, requires_grad=True)
+    reference = x.detach().clone().requires_grad_(True)
+    y, y_ref = Mish()(x), F.mish(reference)
+    torch.testing.assert_close(y, y_ref, rtol=1e-5, atol=2e-6)
+    (slope,) = torch.autograd.grad(y.sum(), x)
+    (slope_ref,) = torch.autograd.grad(y_ref.sum(), reference)
+    torch.testing.assert_close(slope, slope_ref, rtol=1e-5, atol=2e-6)
+
+
 def test_an_update_on_policy_data_far_from_the_expert_stays_finite() -> None:
     """Policy inputs hundreds of standard deviations out (demonstrations of near-constant
     actions) saturate D to 0; the gradient penalty must not turn that into NaN weights."""

@@ -40,14 +40,20 @@ def sinusoidal_embedding(t: torch.Tensor, dim: int) -> torch.Tensor:
 class Mish(nn.Module):
     """Mish(x) = x·tanh(softplus(x)) (Misra 2019), the public DiffAIL code's activation.
 
-    Composed from softplus and tanh rather than ``torch.nn.Mish``, whose fused second
-    derivative is NaN for inputs above ~89; the gradient penalty differentiates twice, and a
-    single NaN there would poison every parameter in one step.
+    Computed as x·n/(n + 2) with n = eˣ(eˣ + 2), the same function: tanh(log(1 + eˣ)) =
+    ((1 + eˣ)² − 1)/((1 + eˣ)² + 1). One ``exp`` instead of softplus's and tanh's
+    transcendentals makes it 1.6 × as fast on a CPU, where three Mish layers were three
+    quarters of the reward's forward pass (Walker2d, 61,440 rows: 136 → 87 ms a layer). eˣ is
+    taken at min(x, 20), past which n/(n + 2) is 1 in float32, so nothing overflows. Not
+    ``torch.nn.Mish`` either: its fused second derivative is NaN above ~89, and the gradient
+    penalty differentiates twice.
     """
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """Mish of x, elementwise."""
-        return x * torch.tanh(nn.functional.softplus(x))
+        e = torch.exp(x.clamp(max=20.0))
+        n = e * (e + 2.0)
+        return x * n / (n + 2.0)
 
 
 class NoisePredictor(nn.Module):
