@@ -15,6 +15,7 @@ from run_devices import build, off_device, run_tensors
 from qdil.cli import main
 from qdil.devices import fabric_settings, run_device
 from qdil.envs.vector import LocomotionVectorEnv
+from qdil.rl.execution import DeviceExecutor, LocalExecutor
 from qdil.rl.vppo import VPPO
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -76,3 +77,19 @@ def test_every_tensor_of_a_run_is_on_its_device(tmp_path, walker_demos) -> None:
         "walk_returns.var on meta",
         "walk_returns.count on meta",
     ]
+
+
+def test_a_recipe_on_a_device_backend_steps_through_the_torch_face(tmp_path) -> None:
+    """The recipe's default executor (in this process) picks the face that fits the physics.
+
+    Regression: ``qdil fit --env.backend warp --env.device cuda`` stepped the numpy face
+    with policies on the GPU and failed at the first action (first run on an H200).
+    """
+    pytest.importorskip("mujoco_warp", reason="the warp extra is not installed")
+    from qdil.rl.collect_device import DeviceCollector
+
+    on_warp = build(SMOKE, tmp_path / "warp", "--env.backend", "warp")
+    assert type(on_warp.vppo.executor) is DeviceExecutor
+    assert isinstance(on_warp.vppo.executor.collector, DeviceCollector)
+    on_c = build(SMOKE, tmp_path / "c")
+    assert type(on_c.vppo.executor) is LocalExecutor
