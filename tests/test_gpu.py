@@ -3,9 +3,10 @@
 Skipped without CUDA. On a machine with an NVIDIA GPU, a CUDA build of torch and the warp
 extra, one command runs them (docs/guides/gpu.md):
 
-    pytest -m gpu -n 0 tests/test_gpu.py tests/rl/test_collect_device.py
+    pytest -m gpu -n 0 tests/test_gpu.py tests/envs/test_warp_backend.py
 
-None of these has run yet: the project's machines have had no GPU.
+First run on an NVIDIA H200 on 2026-11-26 (docs/guides/gpu.md): the fit, the placement and
+the one-step agreement pass; the per-step sync count does not yet (marked xfail, strict).
 """
 
 from __future__ import annotations
@@ -61,6 +62,12 @@ def test_every_tensor_of_a_run_is_on_the_gpu(tmp_path: Path, walker_demos) -> No
     assert isinstance(run.vppo.executor.collector, DeviceCollector)
 
 
+@pytest.mark.xfail(
+    strict=True,
+    reason="measured on an H200 (2026-11-26): 15 synchronising torch calls in 64 steps "
+    "against at most 4 (the reset-queue top-ups); where the others come from is not "
+    "located yet (docs/guides/gpu.md)",
+)
 def test_a_rollout_does_not_sync_with_the_host_per_step(tmp_path: Path) -> None:
     run = build(SMOKE, tmp_path / "run", *ON_GPU)
     vppo, collector = run.vppo, run.vppo.executor.collector

@@ -27,6 +27,8 @@ sensors added by :func:`~qdil.envs.physics.add_contact_sensors`).
 
 from __future__ import annotations
 
+import contextlib
+from collections.abc import Callable
 from typing import Any
 
 import mujoco
@@ -84,6 +86,10 @@ class WarpBatch:
             (needed for ``cfrc_ext``).
         device: Warp device, ``"cpu"`` or ``"cuda[:N]"``.
         num_threads: accepted for the same signature as :class:`MujocoBatch`; unused.
+        graphs: record each fixed sequence of Warp launches (a frame skip of steps, the
+            sensor pass, a reset) in a Warp graph at its first call and replay it after:
+            one launch instead of hundreds from Python, the same kernels on the same arrays
+            (results are bit-identical; ``tests/envs/test_warp_backend.py``).
 
     Attributes:
         exported: (N, E) float64 host array; :meth:`view` returns the slice of one export.
@@ -106,6 +112,7 @@ class WarpBatch:
         rne_post_constraint: bool = False,
         device: str = "cpu",
         num_threads: int | None = None,
+        graphs: bool = True,
     ) -> None:
         if num_sims < 1:
             raise ValueError(f"num_envs must be at least 1, got {num_sims}")
@@ -132,6 +139,12 @@ class WarpBatch:
             # later launches go on torch's stream (_on_torch_stream): finish these first
             self.warp.synchronize_device(self.device)
         self.torch_device = torch.device(self.device)
+        self.graphs = graphs
+        self._graphs: dict[tuple, Any] = {}  # None: launched from Python
+        # a CUDA graph cannot be recorded on torch's legacy default stream: record on one
+        # of Warp's and replay on torch's (the CPU device records without a stream)
+        on_gpu = self.torch_device.type == "cuda"
+        self._capture_stream = self.warp.Stream(self.device) if on_gpu and graphs else None
 
         self._fields = export_bounds(mujoco.MjData(model), exports)
         self._slices = export_slices(self._fields, list(exports))
@@ -223,19 +236,61 @@ class WarpBatch:
                 warp.to_torch(self._keep).copy_(~active)
                 mjw.get_state(self.wmodel, self.wdata, self._saved, self._state)
             self._ctrl.copy_(ctrl)
-            for _ in range(nstep):
-                mjw.step(self.wmodel, self.wdata)
-            if self.rne_post_constraint:
-                mjw.rne_postconstraint(self.wmodel, self.wdata)
+            self._launch(("step", nstep), lambda: self._substeps(nstep))
             if active is not None:
                 mjw.set_state(self.wmodel, self.wdata, self._saved, self._state, self._keep)
             # exports read the post-step data (cfrc_ext, ...) before collision overwrites it
             exported = torch.cat([self._tensor(f)[:, a:b] for f, a, b in self._fields], dim=1)
             if self.model.nsensordata:
-                mjw.kinematics(self.wmodel, self.wdata)
-                mjw.collision(self.wmodel, self.wdata)
-                mjw.sensor_pos(self.wmodel, self.wdata)
+                self._launch(("sensors",), self._sensor_pass)
             self._store_where(active, exported, self._tensor("sensordata"))
+
+    def _substeps(self, nstep: int) -> None:
+        """Launch ``nstep`` MuJoCo Warp steps (and ``rne_postconstraint`` if asked)."""
+        for _ in range(nstep):
+            self.mjw.step(self.wmodel, self.wdata)
+        if self.rne_post_constraint:
+            self.mjw.rne_postconstraint(self.wmodel, self.wdata)
+
+    def _sensor_pass(self) -> None:
+        """Launch the position stage that evaluates the contact sensors at the new state."""
+        self.mjw.kinematics(self.wmodel, self.wdata)
+        self.mjw.collision(self.wmodel, self.wdata)
+        self.mjw.sensor_pos(self.wmodel, self.wdata)
+
+    def _launch(self, key: tuple, launches: Callable[[], None]) -> None:
+        """Run ``launches`` (Warp launches on fixed arrays only), from a graph after the first.
+
+        The first call launches them one by one (Warp compiles and loads their modules) and
+        records them in a graph without running them again; later calls replay the graph on
+        the current stream (torch's, see :meth:`_on_torch_stream`). Python's cost of a
+        MuJoCo Warp step is hundreds of launches; a replay is one.
+        """
+        graph = self._graphs.get(key)
+        if graph is not None:
+            self.warp.capture_launch(graph)
+            return
+        launches()
+        if not self.graphs or key in self._graphs:  # a None entry: it could not be recorded
+            return
+        try:
+            with self._recording_stream():
+                capture = self.warp.ScopedCapture(device=self.device)
+                with capture:
+                    launches()
+            self._graphs[key] = capture.graph
+        except RuntimeError:  # a launch that cannot be recorded: launch it from Python
+            self._graphs[key] = None
+
+    def _recording_stream(self) -> Any:
+        """A context whose Warp launches go to the stream graphs are recorded on.
+
+        On a GPU that is a stream of Warp's own that first waits for torch's; the CPU
+        device records without a stream.
+        """
+        if self._capture_stream is None:
+            return contextlib.nullcontext()
+        return self.warp.ScopedStream(self._capture_stream)
 
     def _store_where(
         self, rows: torch.Tensor | None, exported: torch.Tensor, sensors: torch.Tensor
@@ -289,7 +344,9 @@ class WarpBatch:
         column = mask[:, None]
         with self._on_torch_stream():
             warp.to_torch(self._reset_mask).copy_(mask)
-            mjw.reset_data(self.wmodel, self.wdata, reset=self._reset_mask)
+            self._launch(
+                ("reset",), lambda: mjw.reset_data(self.wmodel, self.wdata, reset=self._reset_mask)
+            )
             # MuJoCo's mj_resetData zeros what only rnePostConstraint computes (forward does
             # not), so gymnasium's first observation holds cfrc_ext = 0; Warp's reset keeps it
             for field in ("cacc", "cfrc_int", "cfrc_ext"):
@@ -299,6 +356,6 @@ class WarpBatch:
             self._qvel.copy_(torch.where(column, qvel.to(torch.float32), self._qvel))
             # forward recomputes every world's derived quantities from its own state; the
             # next step recomputes them anyway, so the other worlds' trajectories are intact
-            mjw.forward(self.wmodel, self.wdata)
+            self._launch(("forward",), lambda: mjw.forward(self.wmodel, self.wdata))
             exported = torch.cat([self._tensor(f)[:, a:b] for f, a, b in self._fields], dim=1)
             self._store_where(mask, exported, self._tensor("sensordata"))
