@@ -11,12 +11,20 @@ the warm start but cannot run ``mj_rnePostConstraint`` after a step, which gymna
 Humanoid and Ant observations need (``cfrc_ext``). The kernel here does exactly what
 gymnasium's ``MujocoEnv.do_simulation`` does, so trajectories are bit-identical.
 
-After each step the kernel also evaluates foot contacts *at the new state*: it runs
-``mj_kinematics`` + ``mj_collision`` + ``mj_sensorPos`` so that MuJoCo ``contact`` sensors
-(added to the model by the caller) report whether each foot touches the floor in that
-configuration. Those calls only overwrite derived quantities that the next ``mj_step``
-recomputes from the state, so the dynamics are unchanged; everything the task reads from the
-post-step data (positions, ``cinert``, ``cfrc_ext``, ...) is copied out *before* them.
+Foot contacts are evaluated *at the new state*, which ``mj_step`` alone does not do (its
+contact list belongs to the state before its last integration). The kernel ends every env
+step with ``mj_step1`` at the new state: MuJoCo's position and velocity stages, the
+collision detection among them, and the position-stage ``contact`` sensors (added to the
+model by the caller) that report whether each foot touches the floor. The next env step's
+first substep then does only what ``mj_step`` does after those stages (``mj_forwardSkip``
+from the velocity stage, ``mj_checkAcc``, the model's integrator: RK4, Euler or implicit),
+so the contact pass costs nothing extra and every substep computes exactly what
+``mj_step`` would (``mj_step1`` + ``mj_step2`` is MuJoCo's own split of ``mj_step``; the
+split here keeps RK4, which ``mj_step2`` would replace by Euler). Everything the task reads
+from the post-step data (positions, ``cinert``, ``cfrc_ext``, ...) is copied out *before*
+``mj_step1`` overwrites the derived quantities. Every simulation is therefore kept in that
+"position and velocity stages done" condition: after construction (``mj_forward``), after
+a reset (``mj_forward``, as gymnasium's ``set_state``) and after every step.
 """
 
 from __future__ import annotations
@@ -59,12 +67,15 @@ def _c_function(name: str, *argtypes: type) -> ctypes._CFuncPtr:
 
 
 _mj_step = _c_function("mj_step", _PTR, _PTR)
+_mj_step1 = _c_function("mj_step1", _PTR, _PTR)
+_mj_forward_skip = _c_function("mj_forwardSkip", _PTR, _PTR, ctypes.c_int, ctypes.c_int)
+_mj_check_acc = _c_function("mj_checkAcc", _PTR, _PTR)
+_mj_euler = _c_function("mj_Euler", _PTR, _PTR)
+_mj_runge_kutta = _c_function("mj_RungeKutta", _PTR, _PTR, ctypes.c_int)
+_mj_implicit = _c_function("mj_implicit", _PTR, _PTR)
 _mj_forward = _c_function("mj_forward", _PTR, _PTR)
 _mj_reset_data = _c_function("mj_resetData", _PTR, _PTR)
 _mj_rne_post_constraint = _c_function("mj_rnePostConstraint", _PTR, _PTR)
-_mj_kinematics = _c_function("mj_kinematics", _PTR, _PTR)
-_mj_collision = _c_function("mj_collision", _PTR, _PTR)
-_mj_sensor_pos = _c_function("mj_sensorPos", _PTR, _PTR)
 _mju_copy = _c_function("mju_copy", _PTR, _PTR, ctypes.c_int)
 
 
@@ -86,6 +97,31 @@ def _reset_one(model, data, qpos_ptr, qvel_ptr, qpos, qvel, j):  # pragma: no co
     _mj_forward(model, data)
 
 
+# MuJoCo's mjtStage and mjtIntegrator values, as plain ints for the kernel
+_STAGE_VEL = int(mujoco.mjtStage.mjSTAGE_VEL)
+_RK4 = int(mujoco.mjtIntegrator.mjINT_RK4)
+_IMPLICIT = int(mujoco.mjtIntegrator.mjINT_IMPLICIT)
+_IMPLICITFAST = int(mujoco.mjtIntegrator.mjINT_IMPLICITFAST)
+
+
+@njit(nogil=True)
+def _first_substep(model, data, integrator):  # pragma: no cover - numba
+    """``mj_step`` on data whose position and velocity stages ran at the current state.
+
+    What ``mj_step`` does after ``mj_checkPos``, ``mj_checkVel`` and those two stages (which
+    ``mj_step1`` at the end of the previous step, or a reset's ``mj_forward``, did): the
+    acceleration stage with the new controls, ``mj_checkAcc`` and the integrator.
+    """
+    _mj_forward_skip(model, data, _STAGE_VEL, 0)
+    _mj_check_acc(model, data)
+    if integrator == _RK4:
+        _mj_runge_kutta(model, data, 4)
+    elif integrator in (_IMPLICIT, _IMPLICITFAST):
+        _mj_implicit(model, data)
+    else:
+        _mj_euler(model, data)
+
+
 @njit(nogil=True, parallel=True)
 def _step_kernel(
     model,
@@ -94,6 +130,7 @@ def _step_kernel(
     ctrl,
     active,
     nstep,
+    integrator,
     rne,
     sources,
     lengths,
@@ -118,17 +155,19 @@ def _step_kernel(
             continue
         if not active[i]:
             continue
+        if nstep < 1:
+            continue
         data = datas[i]
         _mju_copy(ctrl_ptrs[i], ctrl.ctypes.data + i * nu * 8, nu)
-        for _ in range(nstep):
+        _first_substep(model, data, integrator)
+        for _ in range(nstep - 1):
             _mj_step(model, data)
         if rne:
             _mj_rne_post_constraint(model, data)
         _copy_out(i, sources, lengths, offsets, out)
+        # the next step's position and velocity stages, and the contact sensors at this state
+        _mj_step1(model, data)
         if nsensor > 0:
-            _mj_kinematics(model, data)
-            _mj_collision(model, data)
-            _mj_sensor_pos(model, data)
             _mju_copy(sensors.ctypes.data + i * nsensor * 8, sensor_ptrs[i], nsensor)
 
 
@@ -256,6 +295,14 @@ class MujocoBatch:
         self.chunk_size = max(1, -(-num_sims // (CHUNKS_PER_THREAD * self.num_threads)))
         self.rne_post_constraint = rne_post_constraint
         self.datas = [mujoco.MjData(model) for _ in range(num_sims)]
+        for data in self.datas:  # the stages a step's first substep expects done (see above)
+            mujoco.mj_forward(model, data)
+        if model.opt.enableflags & mujoco.mjtEnableBit.mjENBL_FWDINV:
+            raise ValueError(
+                "the model enables fwdinv (option/flag fwdinv); qdil's physics kernel does not "
+                "compare forward and inverse dynamics; disable it in the model"
+            )
+        self._integrator = int(model.opt.integrator)
         self._model_ptr = model._address
         self._data_ptrs = np.array([d._address for d in self.datas], dtype=np.int64)
         self._ctrl_ptrs = self._pointers("ctrl")
@@ -324,6 +371,7 @@ class MujocoBatch:
                 ctrl,
                 self._all if active is None else active,
                 nstep,
+                self._integrator,
                 self.rne_post_constraint,
                 self._sources,
                 self._lengths,
