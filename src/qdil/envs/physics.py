@@ -24,7 +24,11 @@ split here keeps RK4, which ``mj_step2`` would replace by Euler). Everything the
 from the post-step data (positions, ``cinert``, ``cfrc_ext``, ...) is copied out *before*
 ``mj_step1`` overwrites the derived quantities. Every simulation is therefore kept in that
 "position and velocity stages done" condition: after construction (``mj_forward``), after
-a reset (``mj_forward``, as gymnasium's ``set_state``) and after every step.
+a reset (``mj_forward``, as gymnasium's ``set_state``) and after every step. One visible
+difference remains, for a diverged simulation only: MuJoCo's ``mj_checkPos``/``mj_checkVel``
+(NaN or huge values reset the data with a warning) now run at the end of the step that
+diverged instead of at the start of the next, so that step's foot flags describe the reset
+state; its exported observation is the diverged one, as before.
 """
 
 from __future__ import annotations
