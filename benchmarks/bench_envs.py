@@ -14,7 +14,9 @@ For each task, with random actions drawn up front:
 
 The contestants run in alternating rounds (one timed repetition of each per round, after one
 warm-up each), so a machine whose load drifts slows them alike; each number is the median of
-``--reps`` rounds. Ratios compare numbers of the same run.
+``--reps`` rounds. The all-core contestants (qdil, envpool, gymnasium) race first, then the
+one-thread ones (qdil, envpool, the raw loop), each group built afresh so that no other
+group's thread pool lives in the process meanwhile. Ratios compare numbers of the same run.
 
 Usage::
 
@@ -104,6 +106,29 @@ def bench_raw(task_id: str, actions: np.ndarray) -> tuple:
     return run, flat.shape[0]
 
 
+def _contestants(
+    task_id: str, n: int, actions: np.ndarray, cores: int, args, one_thread: bool
+) -> dict[str, tuple]:
+    """The contestants of one group: all cores (qdil, envpool, gymnasium) or one thread
+    (qdil, envpool, the raw loop)."""
+    threads = 1 if one_thread else cores
+    suffix = "1" if one_thread else ""
+    contestants = {
+        f"qdil{suffix}": bench_vector(
+            gym.make_vec(f"qdil/{task_id}", num_envs=n, num_threads=threads), actions
+        )
+    }
+    pool = make_envpool(task_id, n, threads)
+    if pool is not None:
+        contestants[f"envpool{suffix}"] = bench_envpool(pool, actions)
+    if one_thread:
+        contestants["raw"] = bench_raw(task_id, actions[: max(1, args.steps // 8)])
+    elif not args.no_gym:
+        gym_env = gym.make_vec(task_id, num_envs=n, vectorization_mode="sync")
+        contestants["gym"] = bench_vector(gym_env, actions)
+    return contestants
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument(
@@ -135,28 +160,17 @@ def main() -> None:
         low, high = probe.single_action_space.low, probe.single_action_space.high
         for n in args.num_envs:
             actions = rng.uniform(low, high, size=(args.steps, n, low.size)).astype(np.float32)
-            contestants = {
-                "qdil": bench_vector(gym.make_vec(f"qdil/{task_id}", num_envs=n), actions),
-            }
-            if not args.all_cores_only:
-                contestants["qdil1"] = bench_vector(
-                    gym.make_vec(f"qdil/{task_id}", num_envs=n, num_threads=1), actions
-                )
-            pools = (
-                (("envpool", cores),)
-                if args.all_cores_only
-                else (("envpool", cores), ("envpool1", 1))
+            # two groups, timed one after the other: every core, then one thread. Only one
+            # group's environments exist at a time: with a second envpool pool alive in the
+            # process, envpool's all-core rate swung from 13,000 to 20,900 env-steps/s
+            # between runs (Walker2d, N = 64); alone it stays within a few percent
+            rates = _median_rates(
+                _contestants(task_id, n, actions, cores, args, one_thread=False), args.reps
             )
-            for name, threads in pools:
-                pool = make_envpool(task_id, n, threads)
-                if pool is not None:
-                    contestants[name] = bench_envpool(pool, actions)
-            if not args.no_gym:
-                gym_env = gym.make_vec(task_id, num_envs=n, vectorization_mode="sync")
-                contestants["gym"] = bench_vector(gym_env, actions)
             if not args.all_cores_only:
-                contestants["raw"] = bench_raw(task_id, actions[: max(1, args.steps // 8)])
-            rates = _median_rates(contestants, args.reps)
+                rates |= _median_rates(
+                    _contestants(task_id, n, actions, cores, args, one_thread=True), args.reps
+                )
             skipped = {"gym"} if args.no_gym else set()
             if args.all_cores_only:
                 skipped |= {"qdil1", "envpool1", "raw"}
