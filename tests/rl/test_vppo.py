@@ -135,3 +135,30 @@ def test_num_envs_must_split_among_copies() -> None:
     env = LocomotionVectorEnv("Walker2d-v5", 4, autoreset_mode="SameStep")
     with pytest.raises(ValueError, match="divisible by k\\+1=3"):
         algo.setup(env, env, seed=0)
+
+
+@pytest.mark.parametrize("update_stats", [False, True])
+def test_next_state_values_equal_a_second_critic_pass_bit_for_bit(update_stats: bool) -> None:
+    """GAE's V(s_{t+1}) reuses V(s_t) while episodes go on, with the very bits of a pass of
+    the critic over every next observation (the Jacobian copies' frozen statistics and the
+    walk's updated ones)."""
+    from qdil.rl.networks import VectorizedCritic
+    from qdil.rl.ppo import next_state_values, to_policies
+
+    env = LocomotionVectorEnv("Hopper-v5", 6, max_episode_steps=30, autoreset_mode="SameStep")
+    collector = Collector(env)
+    collector.start(seed=3)
+    actor = VectorizedActor(3, 11, 3)
+    actor.set_solutions(
+        np.stack([VectorizedActor.initial_solution(11, 3, seed=s) for s in range(3)])
+    )
+    stats = RunningMeanStd(3, (11,))
+    generator = torch.Generator().manual_seed(0)
+    for _ in range(2):  # the second rollout normalises with statistics that moved
+        rollout, pdata = collector.collect(actor, stats, 40, generator, update_stats)
+    assert rollout.dones.sum() >= 6
+    critic = VectorizedCritic(3, 11)
+    obs, next_obs = to_policies(pdata.norm_obs, 3), to_policies(pdata.norm_next_obs, 3)
+    with torch.no_grad():
+        reused = next_state_values(critic, critic(obs), next_obs, rollout.dones, 40)
+        assert torch.equal(reused, critic(next_obs))
