@@ -157,9 +157,7 @@ def _step_kernel(
             if nsensor > 0:
                 _mju_copy(sensors.ctypes.data + i * nsensor * 8, sensor_ptrs[i], nsensor)
             continue
-        if not active[i]:
-            continue
-        if nstep < 1:
+        if not active[i] or nstep < 1:
             continue
         data = datas[i]
         _mju_copy(ctrl_ptrs[i], ctrl.ctypes.data + i * nu * 8, nu)
@@ -298,15 +296,15 @@ class MujocoBatch:
         # another process holds; results do not depend on it (each simulation is independent)
         self.chunk_size = max(1, -(-num_sims // (CHUNKS_PER_THREAD * self.num_threads)))
         self.rne_post_constraint = rne_post_constraint
-        self.datas = [mujoco.MjData(model) for _ in range(num_sims)]
-        for data in self.datas:  # the stages a step's first substep expects done (see above)
-            mujoco.mj_forward(model, data)
         if model.opt.enableflags & mujoco.mjtEnableBit.mjENBL_FWDINV:
             raise ValueError(
                 "the model enables fwdinv (option/flag fwdinv); qdil's physics kernel does not "
                 "compare forward and inverse dynamics; disable it in the model"
             )
         self._integrator = int(model.opt.integrator)
+        self.datas = [mujoco.MjData(model) for _ in range(num_sims)]
+        for data in self.datas:  # the stages a step's first substep expects done (see above)
+            mujoco.mj_forward(model, data)
         self._model_ptr = model._address
         self._data_ptrs = np.array([d._address for d in self.datas], dtype=np.int64)
         self._ctrl_ptrs = self._pointers("ctrl")
