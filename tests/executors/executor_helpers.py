@@ -58,9 +58,9 @@ def make_vppo(executor: Any, num_envs: int = 12, eval_envs: int = 8) -> VPPO:
     return algo
 
 
-def run_phases(executor: Any) -> list[Any]:
+def run_phases(executor: Any, num_envs: int = 12) -> list[Any]:
     """Everything an iteration computes with the executor: phases, evaluations, the stream."""
-    algo = make_vppo(executor)
+    algo = make_vppo(executor, num_envs)
     theta = algo.initial_solution(0)
     stats = RunningMeanStd(1, (17,))
     out: list[Any] = []

@@ -1,10 +1,19 @@
 """Ray workers give the local results bit for bit, on one node, on a simulated cluster, and
-after a worker is killed; an unreachable cluster is named."""
+after a worker is killed; an unreachable cluster is named, and so is a refused token."""
 
 from __future__ import annotations
 
+import contextlib
 import os
+import secrets
+import shutil
 import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Iterator
 
 import pytest
 
@@ -92,3 +101,96 @@ def test_an_unreachable_cluster_is_named() -> None:
     assert not ray.is_initialized()
     with pytest.raises(ExecutorError, match=r"127\.0\.0\.1:1"):
         make_vppo(RayExecutor(address="127.0.0.1:1"))
+
+
+def _free_port() -> int:
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
+def _env_without_ray_auth(home: str, **extra: str) -> dict[str, str]:
+    """This process's environment without Ray's variables, HOME replaced, ``extra`` added.
+
+    An earlier local ``ray.init`` of this test process sets RAY_AUTH_MODE=token in
+    os.environ, and HOME may hold a ~/.ray/auth_token: neither may leak into the test.
+    """
+    env = {key: value for key, value in os.environ.items() if not key.startswith("RAY_")}
+    return env | {"HOME": home, **extra}
+
+
+@pytest.fixture
+def token_head() -> Iterator[str]:
+    """A Ray head node on this machine that requires a token no other process holds.
+
+    It has its own HOME, ports and temp dir (short: Ray's socket paths must stay under
+    108 characters), so that neither ``ray.init()`` elsewhere on the machine nor this
+    machine's ~/.ray/auth_token meets it. It runs in its own process group, which the
+    teardown kills: ``ray stop`` would also stop every other Ray of the machine.
+    """
+    root = tempfile.mkdtemp(prefix="qdil-ray-")
+    os.mkdir(home := os.path.join(root, "home"))
+    port = _free_port()
+    env = _env_without_ray_auth(home, RAY_AUTH_MODE="token", RAY_AUTH_TOKEN=secrets.token_hex(32))
+    command = [sys.executable, "-m", "ray.scripts.scripts", "start", "--head"]  # `ray start`
+    command += [f"--port={port}", "--num-cpus=1", "--include-dashboard=false", "--block"]
+    command += [f"--dashboard-agent-listen-port={_free_port()}", "--disable-usage-stats"]
+    command += [f"--temp-dir={root}/ray"]
+    with open(os.path.join(root, "head.log"), "w") as log:
+        head = subprocess.Popen(
+            command, env=env, stdout=log, stderr=subprocess.STDOUT, start_new_session=True
+        )
+    try:
+        _wait_for_port(head, port, os.path.join(root, "head.log"))
+        yield f"127.0.0.1:{port}"
+    finally:
+        with contextlib.suppress(ProcessLookupError):  # the group is gone already
+            os.killpg(head.pid, signal.SIGKILL)  # the head and every process it started
+        head.wait()
+        shutil.rmtree(root, ignore_errors=True)
+
+
+def _wait_for_port(head: subprocess.Popen, port: int, log: str) -> None:
+    """Return once the head's GCS port answers; fail with the head's log if it never does."""
+    deadline = time.monotonic() + 60
+    while head.poll() is None and time.monotonic() < deadline:
+        try:
+            socket.create_connection(("127.0.0.1", port), timeout=1).close()
+            return
+        except OSError:
+            time.sleep(0.2)
+    with open(log) as text:
+        pytest.fail(f"the Ray head did not start:\n{text.read()[-3000:]}")
+
+
+# RayExecutor's launch path, without workers, in a process of its own: its Ray state and
+# environment are the test's, not this test process's
+_LAUNCH = """
+from qdil.executors import ExecutorError, RayExecutor
+try:
+    RayExecutor(address={address!r})._launch(None, [])
+except ExecutorError as error:
+    print(error)
+else:
+    print("joined")
+"""
+
+
+@pytest.mark.parametrize(
+    "auth",
+    [
+        {},  # what a run with an explicit address sends by default: no token
+        {"RAY_AUTH_MODE": "token", "RAY_AUTH_TOKEN": "0" * 64},  # another cluster's token
+        {"RAY_AUTH_MODE": "token"},  # asks for tokens, holds none: Ray's own early error
+    ],
+    ids=["no-token-sent", "wrong-token", "no-token-held"],
+)
+def test_a_refused_token_is_named_with_its_fix(token_head: str, auth: dict, tmp_path) -> None:
+    # Ray tries a refused token 20 times, a second apart, before it gives up; 2 tries do here
+    env = _env_without_ray_auth(str(tmp_path), RAY_gcs_server_port_wait_time_s="2", **auth)
+    launch = [sys.executable, "-c", _LAUNCH.format(address=token_head)]
+    done = subprocess.run(launch, env=env, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert "requires Ray's token authentication" in done.stdout, done.stdout
+    assert "RAY_AUTH_TOKEN" in done.stdout and "RAY_AUTH_MODE=disabled" in done.stdout
+    assert "cannot reach" not in done.stdout

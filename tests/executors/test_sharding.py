@@ -5,6 +5,7 @@ from __future__ import annotations
 import itertools
 
 import pytest
+import torch
 from executor_helpers import InProcessExecutor, run_phases, same_outputs
 
 from qdil.executors.shards import MIN_ROWS, shard_bounds
@@ -16,6 +17,29 @@ def test_sharded_runs_equal_the_local_run(workers, local_outputs) -> None:
     got = run_phases(executor)
     assert len(executor.bounds) > 1 or workers == 1
     assert same_outputs(local_outputs, got)
+
+
+def test_a_local_run_repeated_in_one_process_gives_the_same_bits(local_outputs) -> None:
+    """After other allocations and with another torch thread count (MKL's CNR mode, STRICT)."""
+    kept = [torch.empty(7 * k + 1) for k in range(1, 300)]  # the allocator's state moves on
+    threads = torch.get_num_threads()
+    torch.set_num_threads(2 if threads == 1 else 1)
+    try:
+        again = run_phases(None)
+    finally:
+        torch.set_num_threads(threads)
+    assert kept and same_outputs(local_outputs, again)
+
+
+@pytest.mark.parametrize(("num_envs", "workers"), [(6, 2), (6, 7), (3, 2)])
+def test_small_batches_run_on_any_number_of_workers(num_envs: int, workers: int) -> None:
+    """Fewer training shards than workers (6 simulations make one); evaluations follow."""
+    local = run_phases(None, num_envs)
+    executor = InProcessExecutor(num_workers=workers)
+    with pytest.warns(UserWarning, match=f"{workers} asked"):
+        got = run_phases(executor, num_envs)
+    assert len(executor.workers) == len(executor.bounds) < workers
+    assert same_outputs(local, got)
 
 
 @pytest.mark.parametrize(

@@ -18,6 +18,7 @@ import os
 import socket
 from typing import Any
 
+from qdil import numerics
 from qdil.executors.sharded import ShardedExecutor
 from qdil.executors.worker import ShardWorker
 from qdil.rl.execution import ExecutorError
@@ -65,21 +66,29 @@ class RayExecutor(ShardedExecutor):
         ray = import_ray()
         if not ray.is_initialized():
             _check_reachable(self.address)
+            # a Ray older than its token authentication has no AuthenticationError to catch
+            refused = getattr(ray.exceptions, "AuthenticationError", ConnectionError)
             try:
                 ray.init(address=self.address, log_to_driver=True)
-            except (ConnectionError, TimeoutError) as error:
+            except (ConnectionError, TimeoutError, refused) as error:
+                if _token_refused(error):
+                    raise ExecutorError(_token_refused_message(self.address)) from error
                 raise ExecutorError(
                     f"cannot reach the Ray cluster at {self.address!r}: {error}. Start it "
                     "(`ray start --head` on the head node, see docs/guides/clusters.md) or set "
                     "executor.init_args.address to its address"
                 ) from error
+        # every node computes with the head's MKL mode and torch kernels, or refuses to
+        numerics_env = numerics.worker_env()
         actor = ray.remote(
             num_cpus=self.threads_per_worker,
             max_restarts=self.max_restarts,
             max_task_retries=-1,  # retried calls replay the phase: the result is the same
+            runtime_env={"env_vars": numerics_env},
         )(_RayShardWorker)
         self.workers = [
-            actor.remote(factory, start, stop, self.threads_per_worker) for start, stop in bounds
+            actor.remote(factory, start, stop, self.threads_per_worker, numerics_env)
+            for start, stop in bounds
         ]
 
     def _share(self, value: Any) -> Any:
@@ -124,6 +133,62 @@ def _check_reachable(address: str | None) -> None:
             "for a node of the cluster, ray://HOST:10001 for Ray Client) and that no "
             "firewall blocks them; see docs/guides/clusters.md"
         ) from None
+
+
+def _token_refused(error: BaseException) -> bool:
+    """Whether ``ray.init`` failed on the cluster's token authentication, not on the network.
+
+    Ray raises its ``AuthenticationError`` at once when this process asks for token
+    authentication but finds no token. A token that the cluster refuses (none sent, or a
+    different one) surfaces only after Ray's retries, as a ``ConnectionError`` whose cause
+    holds the last GCS error as formatted text: hence the search of the chain's messages.
+
+    Args:
+        error: what ``ray.init`` raised.
+
+    Returns:
+        True if an exception of the chain is, or quotes, Ray's authentication error.
+    """
+    seen: set[int] = set()
+    link: BaseException | None = error
+    while link is not None and id(link) not in seen:
+        seen.add(id(link))
+        if type(link).__name__ == "AuthenticationError" or "InvalidAuthToken" in str(link):
+            return True
+        link = link.__cause__ or link.__context__
+    return False
+
+
+def _token_refused_message(address: str | None) -> str:
+    """The error of a cluster that refused this process's token: why, and the fixes.
+
+    Args:
+        address: the Ray address given to the executor.
+
+    Returns:
+        The message of the :class:`~qdil.rl.execution.ExecutorError`.
+    """
+    mode = os.environ.get("RAY_AUTH_MODE")
+    if mode == "token":
+        why = "the token this process sent is missing or not the cluster's"
+    else:
+        # the usual case: `ray start --head` turns tokens on by itself where
+        # ~/.ray/auth_token exists, but a process joining an explicit address sends its
+        # token only when told to, even from a machine that holds the right file
+        why = (
+            f"this process sent no token (RAY_AUTH_MODE is {mode or 'unset'} here; Ray "
+            "sends one to an explicit address only with RAY_AUTH_MODE=token)"
+        )
+    return (
+        f"the Ray cluster at {address!r} answered but refused this process: it requires "
+        f"Ray's token authentication and {why}. Ray reads the token from RAY_AUTH_TOKEN, "
+        "else from the file that RAY_AUTH_TOKEN_PATH names, else from ~/.ray/auth_token. "
+        "Print the cluster's token with `ray get-auth-token` on the head node, then here "
+        "`export RAY_AUTH_MODE=token RAY_AUTH_TOKEN=<that token>` (or copy the head's "
+        "~/.ray/auth_token to this machine and export RAY_AUTH_MODE=token); on a trusted "
+        "network, start the head node with RAY_AUTH_MODE=disabled instead. See "
+        "docs/guides/clusters.md#authentication"
+    )
 
 
 class _RayShardWorker(ShardWorker):

@@ -11,6 +11,7 @@ What it computes on the head besides: the statistics' application of
 from __future__ import annotations
 
 import abc
+import warnings
 from dataclasses import fields
 from typing import Any
 
@@ -88,6 +89,14 @@ class ShardedExecutor(Executor):
         self.obs_clip = obs_clip
         block = train_env.num_envs // (train_env.num_feet + 1)  # VPPO's k+1 copies
         self.bounds = shard_bounds(train_env.num_envs, max(block, 1), self.num_workers, MIN_ROWS)
+        if len(self.bounds) < self.num_workers:
+            warnings.warn(
+                f"executor num_workers: {self.num_workers} asked, but {train_env.num_envs} "
+                f"training simulations make {len(self.bounds)} shard(s) (a shard keeps at least "
+                f"{MIN_ROWS} simulations of each policy it holds), so {len(self.bounds)} "
+                "worker(s) run; more simulations (env.num_envs) would use more",
+                stacklevel=2,
+            )
         self._launch(train_env.factory, self.bounds)
 
     def start(self, seed: int) -> None:
@@ -156,7 +165,8 @@ class ShardedExecutor(Executor):
             self._evaluations, actor, stats, episodes, seed, record, state, self.obs_clip
         )
         handle = self._share(call)
-        bounds = shard_bounds(used, episodes, self.num_workers)
+        # at most one shard per worker started (a small training batch may start fewer)
+        bounds = shard_bounds(used, episodes, len(self.bounds))
         shards = [(i, (handle, a, b)) for i, (a, b) in enumerate(bounds)]
         plays: list[Played] = self._run("evaluate", shards)
         num_steps = max(p.num_steps for p in plays)

@@ -17,6 +17,7 @@ from typing import Any
 
 import torch
 
+from qdil import numerics
 from qdil.data import Rollout
 from qdil.envs.vector import LocomotionVectorEnv
 from qdil.executors.shards import NoiseReplay, ShardPolicies
@@ -89,11 +90,20 @@ class ShardWorker:
         start: first training simulation of the shard.
         stop: end of the training shard.
         threads: physics and torch threads of this worker.
+        numerics_env: the head's :func:`qdil.numerics.worker_env`; a worker whose MKL mode
+            or torch kernels differ from it raises ``RuntimeError`` instead of computing.
     """
 
     def __init__(
-        self, factory: Callable[..., LocomotionVectorEnv], start: int, stop: int, threads: int
+        self,
+        factory: Callable[..., LocomotionVectorEnv],
+        start: int,
+        stop: int,
+        threads: int,
+        numerics_env: dict[str, str] | None = None,
     ) -> None:
+        # a worker on another CPU computes with the head's kernels or refuses to start
+        numerics.require_env(numerics_env or {}, f"the worker of simulations {start}-{stop}")
         torch.set_num_threads(threads)
         self.factory, self.start, self.stop, self.threads = factory, start, stop, threads
         env = factory(stop - start, autoreset_mode="SameStep", num_threads=threads)
