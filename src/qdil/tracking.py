@@ -157,17 +157,21 @@ class Tracker:
         self.csv = MetricsCSV(run_dir / "metrics.csv")
         self.wandb = None
         if logging.wandb != "disabled":
+            import wandb
             from lightning.pytorch.loggers import WandbLogger
 
-            self.wandb = WandbLogger(
+            # the run is started here rather than by the logger, whose wandb.init passes
+            # ``anonymous``, a setting wandb 0.31 warns about on every run
+            experiment = wandb.init(
                 name=name,
                 id=name.replace("/", "-"),
                 project=logging.wandb_project,
-                save_dir=str(run_dir),
-                offline=logging.wandb == "offline",
+                dir=str(run_dir),
+                mode=logging.wandb,
                 resume="allow",
                 config=config,
             )
+            self.wandb = WandbLogger(experiment=experiment)
 
     def progress(self, start: int, total: int) -> Progress:
         """A progress bar from ``start`` to ``total`` iterations."""

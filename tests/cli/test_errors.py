@@ -57,6 +57,9 @@ def test_every_help_exits_0_and_lists_options(
     assert option in out
     if not args or args[-1] in ("--help", "-h"):
         assert "usage:" in out
+    markup = [line for line in out.splitlines() if "``" in line or line.rstrip().endswith("::")]
+    assert not markup, f"reStructuredText in the help: {markup}"
+    assert out.count("quality-diversity imitation learning") <= 1, "description printed twice"
 
 
 def test_help_of_the_light_commands_imports_no_torch() -> None:

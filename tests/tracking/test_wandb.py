@@ -54,8 +54,9 @@ def history(run_file: Path) -> list[dict]:
 
 
 def test_offline_wandb_run_contains_metrics_images_and_table(tmp_path: Path) -> None:
-    env = {**os.environ, "WANDB_MODE": "offline", "WANDB_SILENT": "true"}
-    subprocess.run(
+    # not silenced: the run's output is what a user sees
+    env = {k: v for k, v in os.environ.items() if k != "WANDB_SILENT"} | {"WANDB_MODE": "offline"}
+    done = subprocess.run(
         [
             sys.executable,
             "-m",
@@ -76,6 +77,7 @@ def test_offline_wandb_run_contains_metrics_images_and_table(tmp_path: Path) -> 
         text=True,
         timeout=600,
     )
+    assert "wandb: WARNING" not in done.stderr + done.stdout, done.stderr
     folders = list((tmp_path / "runs" / "wb" / "wandb").glob("offline-run-*"))
     assert len(folders) == 1
     run_file = next(folders[0].glob("run-*.wandb"))

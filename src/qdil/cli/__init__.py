@@ -1,14 +1,4 @@
-"""The ``qdil`` command line.
-
-::
-
-    qdil fit RECIPE.yaml [--section.key value ...]   train (recipes: jsonargparse dialect)
-    qdil fit --resume RUN_DIR [--qd.iterations N]     continue a run from its checkpoint
-    qdil rewards list                                 registered reward models
-    qdil eval RUN_DIR                                 re-score an archive on the true reward
-    qdil report RUN_DIR... --out DIR                  paper-style tables, tests and figures
-    qdil demos RUN_DIR --out FILE | --info FILE       demonstrations from an expert archive
-"""
+"""The ``qdil`` command line: ``qdil COMMAND --help`` for each command (see :data:`EPILOG`)."""
 
 from __future__ import annotations
 
@@ -25,6 +15,16 @@ from qdil.cli.rewards import rewards
 
 __all__ = ["COMMANDS", "build", "fit_parser", "main", "parse_fit"]
 
+
+EPILOG = """commands:
+  qdil fit RECIPE.yaml [--section.key value ...]   train (recipes: jsonargparse dialect)
+  qdil fit --resume RUN_DIR [--qd.iterations N]     continue a run from its checkpoint
+  qdil rewards list                                 registered reward models
+  qdil eval RUN_DIR                                 re-score an archive on the true reward
+  qdil report RUN_DIR... --out DIR                  paper-style tables, tests and figures
+  qdil demos RUN_DIR --out FILE | --info FILE       demonstrations from an expert archive
+
+`qdil COMMAND --help` lists a command's options."""
 
 COMMANDS = {"fit": fit, "rewards": rewards, "demos": demos, "eval": evaluate, "report": report}
 
@@ -53,13 +53,13 @@ def main(argv: list[str] | None = None) -> None:
     argv = sys.argv[1:] if argv is None else argv
     parser = argparse.ArgumentParser(
         prog="qdil",
-        description=__doc__.split("\n")[0],
-        epilog="`qdil COMMAND --help` lists a command's options.",
+        description="quality-diversity imitation learning (WQDIL on PPGA) for MuJoCo locomotion",
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("command", choices=sorted(COMMANDS), help="what to do")
     if not argv or argv[0] in ("-h", "--help"):
         parser.print_help()
-        print(__doc__)
         return
     command, rest = argv[0], argv[1:]
     if command not in COMMANDS:

@@ -3,10 +3,22 @@
 from __future__ import annotations
 
 import argparse
+import re
 from pathlib import Path
 from typing import Any
 
 from qdil.files import CONFIG_NAME
+
+
+def plain_text(text: str) -> str:
+    """Help text from a docstring without its reStructuredText markup.
+
+    ``name`` becomes name, :class:`~qdil.rl.VPPO` becomes VPPO, and a literal-block
+    marker ``::`` ending a line becomes ``:``.
+    """
+    text = re.sub(r":[a-z]+:`~?(?:[\w.]+\.)?([\w]+)`", r"\1", text)
+    text = text.replace("``", "")
+    return re.sub(r"::(\s*)$", r":\1", text, flags=re.MULTILINE)
 
 
 def at_least(low: int) -> Any:

@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from qdil.cli.args import plain_text
 from qdil.files import CONFIG_NAME
 
 # Only the standard library at import time (see qdil.cli): torch, Lightning and pyribs load
@@ -30,11 +31,30 @@ FIT_EPILOG = (
 
 def fit_parser() -> ArgumentParser:
     """The jsonargparse parser of ``qdil fit``."""
-    from jsonargparse import ActionConfigFile, ArgumentParser
+    from jsonargparse import ActionConfigFile, ArgumentParser, DefaultHelpFormatter
 
     from qdil.recipe import recipe
 
-    parser = ArgumentParser(
+    class PlainHelpFormatter(DefaultHelpFormatter):
+        """jsonargparse's help, its docstring-made texts without reStructuredText markup."""
+
+        def _expand_help(self, action: Any) -> str:
+            return plain_text(super()._expand_help(action))
+
+        def _format_text(self, text: str) -> str:  # group descriptions
+            return super()._format_text(plain_text(text))
+
+        def start_section(self, heading: str | None) -> None:  # group titles
+            super().start_section(heading and plain_text(heading))
+
+    class PlainArgumentParser(ArgumentParser):
+        """Keeps the plain help in the parsers that ``--reward.help NAME`` builds from it."""
+
+        def __init__(self, *args: Any, **kwargs: Any) -> None:
+            kwargs.setdefault("formatter_class", PlainHelpFormatter)
+            super().__init__(*args, **kwargs)
+
+    parser = PlainArgumentParser(
         prog="qdil fit",
         usage=FIT_USAGE,
         description="Train a QD-IL archive from a recipe: a YAML file with the sections "
@@ -179,6 +199,7 @@ def fit(argv: list[str]) -> None:
     import yaml
 
     from qdil.files import atomic_write, remove_stale_temporaries
+    from qdil.provenance import record_start
     from qdil.qd.checkpoint import (
         CHECKPOINT,
         config_differences,
@@ -232,6 +253,7 @@ def fit(argv: list[str]) -> None:
         print(f"resuming {run_dir} at iteration {run.state.iteration}", file=sys.stderr)
     if run.tracker.csv.path.exists():  # rows logged after the checkpoint (all, if none)
         run.tracker.csv.truncate(run.state.iteration)
+    record_start(run_dir, run.state.iteration)
     try:
         run_qd(run)
     except NonFiniteRewardError as error:
