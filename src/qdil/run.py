@@ -14,7 +14,7 @@ from qdil.config import BonusConfig, DemoConfig, EnvConfig, LoggingConfig, QDCon
 from qdil.demos.io import load_demos
 from qdil.devices import fabric_settings, run_device
 from qdil.envs.vector import LocomotionVectorEnv
-from qdil.qd.archives import RunArchives, elite_fields, make_grid
+from qdil.qd.archives import RunArchives, deployable_fields, elite_fields, make_grid
 from qdil.qd.emitter import PPGAEmitter
 from qdil.qd.state import LoopState, Run
 from qdil.rewards.base import RewardModel
@@ -116,10 +116,10 @@ def build_run(
         true=make_grid(
             solution_dim=solution_dim, cells=cells, extra_fields=fields, seed=int(archive_seeds[1])
         ),
-        learned=make_grid(
-            solution_dim=1,
+        deployable=make_grid(
+            solution_dim=solution_dim,
             cells=cells,
-            extra_fields={"length": fields["length"]},
+            extra_fields=deployable_fields(obs_dim),
             seed=int(archive_seeds[2]),
         ),
     )

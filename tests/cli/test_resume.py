@@ -131,6 +131,32 @@ def test_resume_after_config_yaml_was_edited_is_refused(
     assert checkpoint.read_bytes() == before, "a refused resume must not touch the checkpoint"
 
 
+def test_a_checkpoint_from_before_the_deployable_archive_resumes_and_is_scored(
+    finished: Path, tmp_path: Path, monkeypatch, capsys
+) -> None:
+    """Older checkpoints kept an objectives-only ``learned_archive``: it is dropped."""
+    from qdil.evaluation.rescore import rescore_archive
+    from qdil.qd.checkpoint import CheckpointError, load_archive
+
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("QDIL_PLUGIN_PATH", str(tmp_path / "no-plugins"))
+    run_dir = tmp_path / "older"
+    shutil.copytree(finished, run_dir)
+    checkpoint = run_dir / "checkpoints" / "last.pt"
+    state = torch.load(checkpoint, weights_only=False)
+    state["learned_archive"] = state.pop("deployable_archive")
+    torch.save(state, checkpoint)
+    with pytest.raises(CheckpointError, match="predates the deployable archive"):
+        load_archive(run_dir, "deployable")
+    _, summary = rescore_archive(run_dir, episodes=1, num_threads=1)
+    assert summary["deployable"] is None and summary["metrics"]["num_elites"] > 0
+    main(["fit", "--resume", str(run_dir), "--qd.iterations", "2"])
+    assert "predates the deployable archive" in capsys.readouterr().err
+    assert iterations(run_dir) == ["1", "2"]
+    archive, iteration = load_archive(run_dir, "deployable")
+    assert iteration == 2 and len(archive) > 0  # filled from iteration 2 on
+
+
 def test_a_resume_may_change_iterations_threads_and_logging_only() -> None:
     stored = {"qd": {"iterations": 3, "cells": 10}, "env": {"num_threads": None, "task": "W"}}
     stored["logging"] = {"progress": False, "checkpoint_every": 2}

@@ -495,6 +495,33 @@ def test_records_remake_the_same_report_without_checkpoints(
     ).read_text()
 
 
+def test_eval_json_and_records_say_which_code_and_settings_made_them(
+    made: SimpleNamespace,
+) -> None:
+    from qdil.provenance import git_state
+
+    commit, dirty = git_state()
+    evaluation = json.loads((made.runs / "airl0" / "eval.json").read_text())
+    assert evaluation["reset_seed"] == 0 and evaluation["episodes_per_elite"] == 1
+    made_by = evaluation["provenance"]
+    assert (made_by["commit"], made_by["dirty"]) == (commit, dirty)
+    assert {"qdil", "torch", "mujoco", "ribs"} <= {k for k, v in made_by["versions"].items() if v}
+    assert made_by["numerics"].get("MKL_CBWR", "STRICT").endswith("STRICT")
+    trained = json.loads((made.runs / "true0" / "provenance.json").read_text())
+    assert [start["from_iteration"] for start in trained] == [0]
+    assert trained[0]["commit"] == commit
+    # both policy archives are re-scored; a true-reward run's two archives are one
+    deployable = evaluation["deployable"]
+    assert deployable["metrics"] == evaluation["metrics"]
+    assert deployable["training_metrics"] == evaluation["training_metrics"]
+    assert evaluation["qd_score_se"] >= 0.0 and deployable["qd_score_se"] >= 0.0
+    assert (made.runs / "airl0" / "corrected_deployable.pkl").is_file()
+    record = json.loads((made.out / "runs" / "airl0" / "record.json").read_text())["provenance"]
+    assert record["evaluation"]["reset_seed"] == 0 and record["evaluation"]["provenance"]
+    assert record["training"] == trained and record["report"]["commit"] == commit
+    assert (made.out / "runs" / "true0" / "provenance.json").is_file()
+
+
 def test_records_keep_the_method_labels_of_their_report(
     made: SimpleNamespace, tmp_path: Path
 ) -> None:

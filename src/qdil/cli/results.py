@@ -12,8 +12,10 @@ def evaluate(argv: list[str]) -> None:
     """``qdil eval``: re-score a run's archive with deterministic episodes on the true reward."""
     parser = argparse.ArgumentParser(
         prog="qdil eval",
-        description="Re-evaluate every elite of a run's true-return archive with deterministic "
-        "actions; writes corrected_archive.pkl and eval.json into the run directory.",
+        description="Re-evaluate every elite of a run's two policy archives (the paper's "
+        "true-keyed one and the deployable one, chosen by the run's own objective) with "
+        "deterministic actions; writes corrected_archive.pkl, corrected_deployable.pkl and "
+        "eval.json into the run directory.",
     )
     parser.add_argument("run_dir", metavar="RUN_DIR", help="a run directory made by qdil fit")
     parser.add_argument(
@@ -31,14 +33,26 @@ def evaluate(argv: list[str]) -> None:
     _, summary = rescore_archive(
         run_dir, args.episodes, args.batch, args.seed, args.num_threads, progress=True
     )
-    before, after = summary["training_metrics"], summary["metrics"]
-    print(
-        f"{summary['elites_evaluated']} elites x {args.episodes} deterministic episodes "
-        f"({summary['env_steps']:,} env steps)"
-    )
-    print("| metric | training archive | corrected |\n|---|---|---|")
+    deployable = summary["deployable"] or {}
+    columns = [("true-keyed (paper)", summary)]
+    if deployable:
+        columns.append(("deployable", deployable))
+    for name, part in columns:
+        print(
+            f"{name}: {part['elites_evaluated']} elites x {args.episodes} deterministic "
+            f"episodes ({part['env_steps']:,} env steps); QD-Score standard error over "
+            f"episodes {part['qd_score_se']:.4g}"
+        )
+    header = " | ".join(f"{name}: training | {name}: corrected" for name, _ in columns)
+    print(f"| metric | {header} |\n|---|{'---|---|' * len(columns)}")
     for key in ("qd_score", "qd_score_offset", "coverage", "obj_max", "obj_mean", "num_elites"):
-        print(f"| {key} | {before[key]:.6g} | {after[key]:.6g} |")
+        cells = " | ".join(
+            f"{part['training_metrics'][key]:.6g} | {part['metrics'][key]:.6g}"
+            for _, part in columns
+        )
+        print(f"| {key} | {cells} |")
+    if not deployable:
+        print("the checkpoint predates the deployable archive: only the true-keyed one is scored")
 
 
 def report(argv: list[str]) -> None:

@@ -14,7 +14,6 @@ episodes; the provenance keeps both.
 from __future__ import annotations
 
 import datetime
-import subprocess
 from pathlib import Path
 from typing import Any
 
@@ -26,6 +25,7 @@ import qdil
 from qdil.demos.dataset import DemoSet
 from qdil.envs.vector import LocomotionVectorEnv
 from qdil.files import CONFIG_NAME
+from qdil.provenance import git_state
 from qdil.qd.checkpoint import load_archive
 from qdil.rl.collect import ActionMap
 from qdil.rl.networks import VectorizedActor
@@ -163,20 +163,6 @@ def record_episodes(
     return demos, stacked["qpos"], stacked["qvel"]
 
 
-def _git_commit() -> str | None:
-    try:
-        out = subprocess.run(
-            ["git", "rev-parse", "HEAD"],
-            capture_output=True,
-            text=True,
-            timeout=5,
-            cwd=Path(qdil.__file__).parent,
-        )
-    except (OSError, subprocess.SubprocessError):
-        return None
-    return out.stdout.strip() or None
-
-
 def demos_from_run(
     run_dir: str | Path, top: int = 500, num: int = 4, seed: int = 0
 ) -> tuple[DemoSet, np.ndarray, np.ndarray]:
@@ -208,6 +194,7 @@ def demos_from_run(
         max_episode_steps=int(env.get("max_episode_steps", 1000)),
         task_kwargs=env.get("task_kwargs") or {},
     )
+    commit, dirty = git_state()
     metadata = {
         "task": env["task"],
         "run": str(run_dir.resolve()),
@@ -218,7 +205,8 @@ def demos_from_run(
         "reset_seed": seed,
         "deterministic": True,
         "qdil_version": qdil.__version__,
-        "git_commit": _git_commit(),
+        "git_commit": commit,
+        "git_dirty": dirty,
         "created": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
         "selection": {
             "top": top,

@@ -6,9 +6,11 @@ copies, for every run it includes, a **record** into ``<out>/runs/<run name>/``:
 
 - ``config.yaml`` and ``metrics.csv``, copied (the recipe that reproduces the run and its
   learning curves),
-- ``eval.json``, copied when the numbers come from ``qdil eval``,
-- ``record.json``: the iteration, the source of the final metrics, the metrics themselves and
-  the notes the report made,
+- ``eval.json``, copied when the numbers come from ``qdil eval``, and ``provenance.json``
+  (the commit and versions of each start of the run),
+- ``record.json``: the iteration, the source of the final metrics, the metrics themselves,
+  the notes the report made, and the provenance of the training, the re-scoring (its reset
+  seed and episodes per elite) and the report,
 - ``archive.csv``: the final archive without policies, one row per elite (cell index,
   objective, measures).
 
@@ -30,11 +32,12 @@ from ribs.archives import GridArchive
 
 from qdil.evaluation.rescore import EVAL_JSON
 from qdil.files import CONFIG_NAME
+from qdil.provenance import PROVENANCE_JSON, provenance
 
 RECORD_JSON = "record.json"
 ARCHIVE_CSV = "archive.csv"
 RECORD_FORMAT = 1
-COPIED = (CONFIG_NAME, "metrics.csv", EVAL_JSON)
+COPIED = (CONFIG_NAME, "metrics.csv", EVAL_JSON, PROVENANCE_JSON)
 
 
 @dataclass
@@ -108,6 +111,7 @@ def write_record(run_dir: Path, record: Record, dest: Path) -> Path:
             [float(lo), float(hi)]
             for lo, hi in zip(archive.lower_bounds, archive.upper_bounds, strict=True)
         ],
+        "provenance": _provenance(run_dir),
     }
     (tmp / RECORD_JSON).write_text(json.dumps(summary, indent=1) + "\n")
     data = archive.data(["index", "objective", "measures"])
@@ -120,6 +124,18 @@ def write_record(run_dir: Path, record: Record, dest: Path) -> Path:
         ):
             writer.writerow([int(index), repr(float(objective)), *map(repr, map(float, measures))])
     return _swap(tmp, dest)
+
+
+def _provenance(run_dir: Path) -> dict:
+    """Who made the run's numbers: training starts, re-scoring, and this report."""
+    found: dict = {"training": None, "evaluation": None, "report": provenance()}
+    if (run_dir / PROVENANCE_JSON).is_file():
+        found["training"] = json.loads((run_dir / PROVENANCE_JSON).read_text())
+    if (run_dir / EVAL_JSON).is_file():
+        summary = json.loads((run_dir / EVAL_JSON).read_text())
+        keys = ("reset_seed", "episodes_per_elite", "iteration", "provenance")
+        found["evaluation"] = {key: summary.get(key) for key in keys}
+    return found
 
 
 def _swap(tmp: Path, dest: Path) -> Path:

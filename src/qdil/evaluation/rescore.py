@@ -1,14 +1,15 @@
 """``qdil eval``: re-score every elite on the true reward (PPGA's corrected metrics, D12).
 
 Branches are scored during training on a few stochastic episodes, so archive objectives
-are noisy. The corrected archive re-plays every elite of the true-return archive for
-``episodes`` deterministic episodes (mean actions, the elite's own observation statistics)
-and inserts it at its re-measured cell into a fresh archive; when two elites land in one
-cell the better one stays.
+are noisy. A corrected archive re-plays every elite for ``episodes`` deterministic episodes
+(mean actions, the elite's own observation statistics) and inserts it at its re-measured
+cell into a fresh archive; when two elites land in one cell the better one stays. Both
+policy archives of a run are corrected: the paper's true-keyed one and the deployable one
+(:mod:`qdil.qd.archives`).
 
-Cost: elites × episodes × mean episode length env steps. Measured on 2 cores: the 1,280
-elites of a 180-iteration Walker2d run, one episode each, 704,579 env steps in 1 min 56 s
-(about 6,900 env-steps/s with loading); the time grows linearly with ``episodes``.
+Cost: elites × episodes × mean episode length env steps per archive. Measured on 2 cores:
+the 1,280 elites of a 180-iteration Walker2d run, one episode each, 704,579 env steps in
+1 min 56 s (about 6,900 env-steps/s with loading); the time grows linearly with ``episodes``.
 """
 
 from __future__ import annotations
@@ -24,40 +25,51 @@ from ribs.archives import GridArchive
 
 from qdil.envs.vector import LocomotionVectorEnv
 from qdil.files import CONFIG_NAME, atomic_write
-from qdil.qd.archives import QD_OFFSETS, elite_fields, make_grid, qd_metrics
-from qdil.qd.checkpoint import dumps_compact, load_archive
+from qdil.provenance import provenance
+from qdil.qd.archives import QD_OFFSETS, elite_fields, make_grid, qd_metrics, true_keyed
+from qdil.qd.checkpoint import CheckpointError, dumps_compact, load_archive
 from qdil.rl.episodes import evaluate_policies
 from qdil.rl.networks import VectorizedActor
 from qdil.rl.normalize import RunningMeanStd
 
 CORRECTED = "corrected_archive.pkl"
+CORRECTED_DEPLOYABLE = "corrected_deployable.pkl"
 EVAL_JSON = "eval.json"
 
 
-def rescore_archive(
+def rescore(
     run_dir: str | Path,
+    which: str = "true",
     episodes: int = 5,
     batch: int = 64,
     seed: int = 0,
     num_threads: int | None = None,
     progress: bool = False,
 ) -> tuple[GridArchive, dict[str, Any]]:
-    """Re-evaluate every elite of a run's true-return archive.
+    """Re-evaluate every elite of one of a run's policy archives (no file is written).
 
     Args:
         run_dir: the run directory.
+        which: ``true`` (the paper's archive) or ``deployable``.
         episodes: deterministic episodes per elite (PPGA: 50).
         batch: elites evaluated together.
-        seed: reset seed.
+        seed: reset seed (elite i's episodes reset with seeds from ``seed + i·episodes``).
         num_threads: physics threads (``None``: every core).
         progress: show a progress bar.
 
     Returns:
-        The corrected archive and a summary with its metrics.
+        The corrected archive, whose elites carry ``return_se`` (the standard error of
+        their mean return over the episodes), and a summary: ``metrics`` (corrected),
+        ``training_metrics`` (the elites' true returns as scored in training),
+        ``qd_score_se`` (standard error of the corrected QD-Score over episodes), and for
+        the deployable archive ``learned_metrics`` (by the objective that chose its elites).
+
+    Raises:
+        CheckpointError: the run has no checkpoint, or one without this archive.
     """
     run_dir = Path(run_dir)
     config = yaml.safe_load((run_dir / CONFIG_NAME).read_text())
-    archive, iteration = load_archive(run_dir, "true")
+    archive, iteration = load_archive(run_dir, which)
     elites = archive.data()
     env_cfg = config["env"]
     rl = (config.get("rl") or {}).get("init_args") or {}
@@ -76,11 +88,12 @@ def rescore_archive(
     obs_dim = env.single_observation_space.shape[0]
     action_dim = env.single_action_space.shape[0]
     objective, measures, lengths = np.zeros(count), np.zeros((count, env.num_feet)), np.zeros(count)
+    spread = np.zeros(count)
     steps = 0
     from tqdm.auto import tqdm
 
     for start in tqdm(
-        range(0, count, width), disable=not progress, desc="re-evaluating", unit="batch"
+        range(0, count, width), disable=not progress, desc=f"re-evaluating {which}", unit="batch"
     ):
         rows = np.arange(start, min(start + width, count))
         actor = VectorizedActor(len(rows), obs_dim, action_dim, hidden)
@@ -95,11 +108,12 @@ def rescore_archive(
             result.measures,
             result.lengths,
         )
+        spread[rows] = result.true_std
         steps += result.env_steps
     corrected = make_grid(
         solution_dim=archive.solution_dim,
         cells=list(archive.dims),
-        extra_fields=elite_fields(obs_dim),
+        extra_fields=elite_fields(obs_dim) | {"return_se": ((), np.float64)},
     )
     if count:
         corrected.add(
@@ -110,19 +124,73 @@ def rescore_archive(
             obs_var=elites["obs_var"],
             obs_count=elites["obs_count"],
             length=lengths,
+            return_se=spread / np.sqrt(episodes),
         )
-    metrics = qd_metrics(corrected, QD_OFFSETS.get(env_cfg["task"], 0.0))
+    offset = QD_OFFSETS.get(env_cfg["task"], 0.0)
+    kept_se = corrected.data(["return_se"])["return_se"]
     summary = {
-        "run": str(run_dir),
-        "task": env_cfg["task"],
         "iteration": iteration,
-        "episodes_per_elite": episodes,
-        "deterministic": True,
         "elites_evaluated": count,
         "env_steps": steps,
-        "metrics": metrics,
-        "training_metrics": qd_metrics(archive, QD_OFFSETS.get(env_cfg["task"], 0.0)),
+        "metrics": qd_metrics(corrected, offset),
+        "qd_score_se": float(np.sqrt(np.sum(kept_se**2))),
+        "training_metrics": qd_metrics(
+            true_keyed(archive) if which == "deployable" else archive, offset
+        ),
     }
+    if which == "deployable":
+        summary["learned_metrics"] = qd_metrics(archive, offset)
+    return corrected, summary
+
+
+def rescore_archive(
+    run_dir: str | Path,
+    episodes: int = 5,
+    batch: int = 64,
+    seed: int = 0,
+    num_threads: int | None = None,
+    progress: bool = False,
+) -> tuple[GridArchive, dict[str, Any]]:
+    """Re-evaluate every elite of a run's two policy archives; write the results.
+
+    Writes ``corrected_archive.pkl`` (the true-keyed archive corrected),
+    ``corrected_deployable.pkl`` and ``eval.json``. A checkpoint from before the deployable
+    archive existed gives ``"deployable": null``.
+
+    Args:
+        run_dir: the run directory.
+        episodes: deterministic episodes per elite (PPGA: 50).
+        batch: elites evaluated together.
+        seed: reset seed (see :func:`rescore`).
+        num_threads: physics threads (``None``: every core).
+        progress: show a progress bar.
+
+    Returns:
+        The corrected true-keyed archive and ``eval.json``'s content: the true-keyed
+        archive's summary (:func:`rescore`) at the top level, the deployable one's under
+        ``deployable``, the settings and the provenance.
+    """
+    run_dir = Path(run_dir)
+    task = yaml.safe_load((run_dir / CONFIG_NAME).read_text())["env"]["task"]
+    settings = (episodes, batch, seed, num_threads, progress)
+    corrected, found = rescore(run_dir, "true", *settings)
+    summary = {
+        "run": str(run_dir),
+        "task": task,
+        "iteration": found["iteration"],
+        "episodes_per_elite": episodes,
+        "reset_seed": seed,
+        "deterministic": True,
+        **{key: value for key, value in found.items() if key != "iteration"},
+        "deployable": None,
+        "provenance": provenance(),
+    }
+    try:
+        deployable, summary["deployable"] = rescore(run_dir, "deployable", *settings)
+    except CheckpointError:  # a checkpoint that predates the deployable archive
+        deployable = None
+    else:
+        atomic_write(run_dir / CORRECTED_DEPLOYABLE, lambda f: f.write(dumps_compact(deployable)))
     atomic_write(run_dir / CORRECTED, lambda f: f.write(dumps_compact(corrected)))
     atomic_write(run_dir / EVAL_JSON, lambda f: f.write(json.dumps(summary, indent=1).encode()))
     return corrected, summary

@@ -6,9 +6,11 @@ A run keeps three pyribs ``GridArchive``s over the k foot-contact measures in [0
   ``Scheduler``. Its objective is the *learned* return (learned reward + bonus), so
   thresholds, xNES ranking and restarts never see the true reward.
 - ``true``: a passive MAP-Elites archive of the same solutions keyed on their **true**
-  return. Every reported metric comes from it; ``qdil eval`` and ``qdil demos`` read it.
-- ``learned``: a passive archive of the learned returns, for the learned-reward metrics.
-  It stores no policies (solution_dim 1), only objectives.
+  return: the paper's reported archive, an oracle's choice of elites.
+- ``deployable``: a passive MAP-Elites archive keyed on the run's own objective (the learned
+  return as scored when the policy was proposed): the best elite per cell that a user
+  without the true reward gets. Its elites carry their true return as the ``true_return``
+  field, so that the archive is re-scored and reported like ``true``.
 
 Extra fields carried by every elite: its observation statistics (``obs_mean``,
 ``obs_var``, ``obs_count``) and its mean episode length (``length``, for the offset
@@ -50,6 +52,29 @@ def elite_fields(obs_dim: int) -> dict[str, tuple[tuple[int, ...], type]]:
     }
 
 
+def deployable_fields(obs_dim: int) -> dict[str, tuple[tuple[int, ...], type]]:
+    """:func:`elite_fields` and the elite's true return (the deployable archive's)."""
+    return elite_fields(obs_dim) | {"true_return": ((), np.float64)}
+
+
+def true_keyed(archive: GridArchive) -> GridArchive:
+    """The deployable archive's elites with their true returns as objectives.
+
+    The cells, policies and statistics are the deployable archive's own: these are the
+    policies a user gets, scored the way the paper scores its true archive.
+    """
+    keyed = make_grid(
+        solution_dim=archive.solution_dim,
+        cells=list(archive.dims),
+        extra_fields=elite_fields(archive.data(["obs_mean"])["obs_mean"].shape[1]),
+    )
+    data = archive.data()
+    if len(data["index"]):
+        fields = {key: data[key] for key in ("obs_mean", "obs_var", "obs_count", "length")}
+        keyed.add(data["solution"], data["true_return"], data["measures"], **fields)
+    return keyed
+
+
 def make_grid(
     *,
     solution_dim: int,
@@ -80,7 +105,7 @@ class RunArchives:
 
     main: GridArchive
     true: GridArchive
-    learned: GridArchive
+    deployable: GridArchive
 
     def add(
         self,
@@ -92,8 +117,7 @@ class RunArchives:
     ) -> None:
         """Insert solutions into the passive archives (the scheduler fills ``main``)."""
         self.true.add(solutions, true_objective, measures, **fields)
-        dummy = np.zeros((len(solutions), 1), dtype=np.float32)
-        self.learned.add(dummy, objective, measures, length=fields["length"])
+        self.deployable.add(solutions, objective, measures, true_return=true_objective, **fields)
 
 
 def qd_metrics(archive: ArchiveBase, offset: float = 0.0) -> dict[str, float]:

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import io
 import pickle
+import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -152,7 +153,7 @@ def save_checkpoint(run: Run) -> Path:
         "torch_rng": torch.get_rng_state(),
         "scheduler": dumps_compact(run.scheduler),
         "true_archive": dumps_compact(run.archives.true),
-        "learned_archive": dumps_compact(run.archives.learned),
+        "deployable_archive": dumps_compact(run.archives.deployable),
         "vppo": run.vppo.state_dict(),
         "reward": {
             "class": f"{type(reward).__module__}.{type(reward).__qualname__}",
@@ -230,7 +231,14 @@ def load_checkpoint(run: Run, state: dict[str, Any] | None = None) -> None:
     run.emitter = run.scheduler.emitters[0]
     run.archives.main = run.scheduler.archive
     run.archives.true = pickle.loads(state["true_archive"])
-    run.archives.learned = pickle.loads(state["learned_archive"])
+    if "deployable_archive" in state:
+        run.archives.deployable = pickle.loads(state["deployable_archive"])
+    else:  # a checkpoint from before the deployable archive kept objectives, no policies
+        print(
+            f"{path} predates the deployable archive (best policy per cell by the run's own "
+            f"objective): it starts empty at iteration {state['iteration']}",
+            file=sys.stderr,
+        )
     run.vppo.load_state_dict(state["vppo"])
     run.reward.load_state_dict(state["reward"]["state_dict"])
     for optimizer, opt_state in zip(
@@ -241,7 +249,7 @@ def load_checkpoint(run: Run, state: dict[str, Any] | None = None) -> None:
 
 
 def load_archive(run_dir: str | Path, which: str = "true") -> tuple[Any, int]:
-    """An archive of a run's last checkpoint: ``true``, ``learned`` or ``main`` (CMA-MAE).
+    """An archive of a run's last checkpoint: ``true``, ``deployable`` or ``main`` (CMA-MAE).
 
     Returns:
         The pyribs archive and the iteration it was saved at.
@@ -258,6 +266,11 @@ def load_archive(run_dir: str | Path, which: str = "true") -> tuple[Any, int]:
     state = read_checkpoint(path)
     if which == "main":
         return pickle.loads(state["scheduler"]).archive, state["iteration"]
-    if which not in ("true", "learned"):
-        raise ValueError(f"which must be true, learned or main, got {which!r}")
+    if which not in ("true", "deployable"):
+        raise ValueError(f"which must be true, deployable or main, got {which!r}")
+    if f"{which}_archive" not in state:
+        raise CheckpointError(
+            f"{run_dir}: the checkpoint predates the deployable archive (qdil fit --resume "
+            "starts one from the next iteration)"
+        )
     return pickle.loads(state[f"{which}_archive"]), state["iteration"]

@@ -187,7 +187,7 @@ def qd_iteration(run: Run) -> dict[str, float]:
     metrics = {f"qd/{k}": v for k, v in qd_metrics(run.archives.true, offset).items()}
     if not run.reward.is_true_reward:
         metrics |= {
-            f"qd_learned/{k}": v for k, v in qd_metrics(run.archives.learned, offset).items()
+            f"qd_learned/{k}": v for k, v in qd_metrics(run.archives.deployable, offset).items()
         }
     metrics |= {f"rl/jacobian_{k}": v for k, v in jacobian_phase.diagnostics.items()}
     metrics |= {f"rl/walk_{k}": v for k, v in walk.diagnostics.items()}

@@ -261,10 +261,12 @@ def evaluate_on_device(
         x = x.double().cpu().numpy()
         return x.reshape(num_policies, episodes, *x.shape[1:]).mean(axis=1)
 
+    by_policy = returns.double().cpu().numpy().reshape(num_policies, episodes)
     return Evaluation(
         objective=per_policy(objective),
         true_objective=per_policy(returns),
         measures=per_policy(measures),
         lengths=per_policy(lengths),
         env_steps=int(counts.sum()),
+        true_std=by_policy.std(axis=1, ddof=1) if episodes > 1 else np.zeros(num_policies),
     )

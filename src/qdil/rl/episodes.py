@@ -31,6 +31,8 @@ class Evaluation:
         measures: (P, k) mean episode measures.
         lengths: (P,) mean episode lengths.
         env_steps: simulated env steps.
+        true_std: (P,) sample standard deviation of the true return over a policy's
+            episodes (zeros with one episode).
     """
 
     objective: np.ndarray
@@ -38,6 +40,7 @@ class Evaluation:
     measures: np.ndarray
     lengths: np.ndarray
     env_steps: int
+    true_std: np.ndarray
 
 
 class EpisodePlayer:
@@ -152,12 +155,14 @@ def score(
     def per_policy(x: np.ndarray) -> np.ndarray:
         return x.reshape(num_policies, episodes, *x.shape[1:]).mean(axis=1)
 
+    by_policy = returns.reshape(num_policies, episodes)
     return Evaluation(
         objective=per_policy(objective),
         true_objective=per_policy(returns),
         measures=per_policy(measures),
         lengths=per_policy(lengths),
         env_steps=env_steps,
+        true_std=by_policy.std(axis=1, ddof=1) if episodes > 1 else np.zeros(num_policies),
     )
 
 
