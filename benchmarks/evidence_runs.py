@@ -1,0 +1,132 @@
+"""The evidence runs of docs/evidence-protocol.md: one queue, worked off by parallel slots.
+
+Every run of the protocol is listed here with its recipe, seed and budget, so the queue is
+the protocol's own record of what was run. A slot takes the first run that is neither
+finished nor taken by another live slot, starts it (or continues it from its checkpoint:
+``qdil fit --resume``), re-scores both archives with ``qdil eval`` once it finishes, and
+takes the next. Start one slot per core, each in its own session group::
+
+    setsid python benchmarks/evidence_runs.py run > runs/evidence/slot0.log 2>&1 &
+    setsid python benchmarks/evidence_runs.py run > runs/evidence/slot1.log 2>&1 &
+    python benchmarks/evidence_runs.py status
+
+A killed slot leaves its run at its last checkpoint (every 10 iterations); the next slot
+that takes the run continues it bit for bit.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import os
+import subprocess
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+OUT = Path("runs") / "evidence"
+EPISODES = {"HalfCheetah-v5": 5, "Walker2d-v5": 5, "Humanoid-v5": 5}
+"""Re-scoring episodes per elite (the protocol's rule for raising them: its page)."""
+
+
+@dataclass(frozen=True)
+class Planned:
+    """One run of the protocol."""
+
+    task: str
+    recipe: str
+    seed: int
+    iterations: int
+
+    @property
+    def name(self) -> str:
+        return f"{Path(self.recipe).stem}-seed{self.seed}"
+
+
+def _runs(task: str, stem: str, methods: tuple[str, ...], seeds: range, its: int) -> list:
+    return [
+        Planned(task, f"recipes/{stem}_{method}.yaml", seed, its)
+        for seed in seeds
+        for method in methods
+    ]
+
+
+# the order is the protocol's: HalfCheetah, then Walker2d; Humanoid follows its expert
+QUEUE = _runs("HalfCheetah-v5", "halfcheetah", ("mcwae", "gail", "ppga"), range(3), 120) + _runs(
+    "Walker2d-v5", "walker", ("mcwae", "gail", "ppga"), range(3, 5), 120
+)
+
+
+def progress(run: Planned) -> tuple[int, bool]:
+    """Iterations logged and whether ``qdil eval`` re-scored the run's last checkpoint."""
+    folder = OUT / run.name
+    logged = 0
+    if (folder / "metrics.csv").is_file():
+        with open(folder / "metrics.csv", newline="") as file:
+            logged = max((int(row["iteration"]) for row in csv.DictReader(file)), default=0)
+    return logged, (folder / "eval.json").is_file()
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    return True
+
+
+def take(run: Planned) -> bool:
+    """Claim ``run`` for this process unless a live slot holds it."""
+    lock = OUT / f"{run.name}.lock"
+    if lock.exists() and lock.read_text().strip().isdigit():
+        pid = int(lock.read_text())
+        if pid != os.getpid() and _alive(pid):
+            return False
+    lock.write_text(str(os.getpid()))
+    return lock.read_text() == str(os.getpid())  # a slot that wrote at the same time loses
+
+
+def work(run: Planned) -> None:
+    """Fit (or continue) ``run`` to its budget, then re-score both archives."""
+    folder = OUT / run.name
+    logged, _ = progress(run)
+    if (folder / "checkpoints" / "last.pt").exists() or (folder / "config.yaml").exists():
+        command = ["fit", "--resume", str(folder), "--qd.iterations", str(run.iterations)]
+    else:
+        command = ["fit", str(ROOT / run.recipe), "--seed", str(run.seed)]
+        command += ["--qd.iterations", str(run.iterations), "--name", run.name]
+        command += ["--logging.root", str(OUT)]
+    command += ["--env.num_threads", "1", "--logging.checkpoint_every", "10"]
+    command += ["--logging.wandb", "disabled", "--logging.progress", "false"]
+    if logged < run.iterations:
+        print("qdil", " ".join(command), flush=True)
+        subprocess.run([sys.executable, "-m", "qdil.cli", *command], check=True)
+    episodes = str(EPISODES[run.task])
+    evaluate = ["eval", str(folder), "--episodes", episodes, "--num-threads", "1"]
+    print("qdil", " ".join(evaluate), flush=True)
+    subprocess.run([sys.executable, "-m", "qdil.cli", *evaluate], check=True)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("action", choices=("run", "status"))
+    args = parser.parse_args()
+    OUT.mkdir(parents=True, exist_ok=True)
+    if args.action == "status":
+        for run in QUEUE:
+            logged, scored = progress(run)
+            print(f"{run.name:34s} {logged:4d}/{run.iterations} {'re-scored' if scored else ''}")
+        return
+    while True:
+        todo = [run for run in QUEUE if not progress(run)[1]]
+        mine = next((run for run in todo if take(run)), None)
+        if mine is None:
+            print("nothing left to take", flush=True)
+            return
+        work(mine)
+        (OUT / f"{mine.name}.lock").unlink(missing_ok=True)
+
+
+if __name__ == "__main__":
+    main()
