@@ -53,7 +53,7 @@ def _runs(task: str, stem: str, methods: tuple[str, ...], seeds: range, its: int
 
 
 # the order is the protocol's: HalfCheetah, then Walker2d; Humanoid follows its expert
-QUEUE = _runs("HalfCheetah-v5", "halfcheetah", ("mcwae", "gail", "ppga"), range(3), 120) + _runs(
+QUEUE = _runs("HalfCheetah-v5", "halfcheetah", ("mcwae", "gail", "ppga"), range(3), 50) + _runs(
     "Walker2d-v5", "walker", ("mcwae", "gail", "ppga"), range(3, 5), 120
 )
 
