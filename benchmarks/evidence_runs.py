@@ -99,9 +99,10 @@ def work(run: Planned) -> None:
         command += ["--logging.root", str(OUT)]
     command += ["--env.num_threads", "1", "--logging.checkpoint_every", "10"]
     command += ["--logging.wandb", "disabled", "--logging.progress", "false"]
-    if logged < run.iterations:
-        print("qdil", " ".join(command), flush=True)
-        subprocess.run([sys.executable, "-m", "qdil.cli", *command], check=True)
+    # also at the budget: the resume writes the budget into config.yaml (a run begun with
+    # another target stops at its checkpoint there; nothing else depends on the target)
+    print("qdil", " ".join(command), f"# {logged} iterations logged", flush=True)
+    subprocess.run([sys.executable, "-m", "qdil.cli", *command], check=True)
     episodes = str(EPISODES[run.task])
     evaluate = ["eval", str(folder), "--episodes", episodes, "--num-threads", "1"]
     print("qdil", " ".join(evaluate), flush=True)
