@@ -479,6 +479,8 @@ def test_records_remake_the_same_report_without_checkpoints(
         assert row["source"].startswith(before[name]["source"])
         assert "from the record of" in row["source"]
     assert (tmp_path / "again" / "table.csv").read_text() == (made.out / "table.csv").read_text()
+    again_deployable = (tmp_path / "again" / "table_deployable.csv").read_text()
+    assert again_deployable == (made.out / "table_deployable.csv").read_text()
     assert (tmp_path / "again" / "tukey.csv").read_text() == (made.out / "tukey.csv").read_text()
     # the corrected archive of a re-scored run is the one kept, cell for cell
     (airl0,) = [r for r in again.runs if r.path.name == "airl0"]
@@ -493,6 +495,32 @@ def test_records_remake_the_same_report_without_checkpoints(
     assert (tmp_path / "again" / "runs" / "true0" / "record.json").read_text() == (
         kept / "true0" / "record.json"
     ).read_text()
+
+
+def test_the_deployable_archives_are_tabled_beside_the_true_keyed_ones(
+    made: SimpleNamespace,
+) -> None:
+    """True-reward runs choose their elites by the true return: their two archives agree
+    (up to the order in which pyribs sums the same elites)."""
+    true_rows, deployable_rows = (
+        read_csv(made.out / n) for n in ("table.csv", "table_deployable.csv")
+    )
+    assert len(true_rows) == len(deployable_rows) == 3
+    for a, b in zip(true_rows, deployable_rows, strict=True):
+        assert a.keys() == b.keys()
+        for key in a:
+            if key.endswith(("_mean", "_std")):
+                assert float(b[key]) == pytest.approx(float(a[key]), rel=1e-12, nan_ok=True)
+            else:
+                assert b[key] == a[key], key
+    page = (made.out / "report.md").read_text()
+    assert "the true-keyed archives (the paper's protocol)" in page
+    assert "The deployable archives" in page and "oracle" in page
+    rows = {Path(r["path"]).name: r for r in read_csv(made.out / "runs.csv")}
+    deployable, true = (float(rows["airl0"][k]) for k in ("deployable_qd_score", "qd_score"))
+    assert deployable == pytest.approx(true, rel=1e-12)
+    assert rows["airl0"]["deployable_source"].startswith("corrected")
+    assert rows["true2"]["deployable_source"].startswith("training archive")
 
 
 def test_eval_json_and_records_say_which_code_and_settings_made_them(
@@ -512,8 +540,8 @@ def test_eval_json_and_records_say_which_code_and_settings_made_them(
     assert trained[0]["commit"] == commit
     # both policy archives are re-scored; a true-reward run's two archives are one
     deployable = evaluation["deployable"]
-    assert deployable["metrics"] == evaluation["metrics"]
-    assert deployable["training_metrics"] == evaluation["training_metrics"]
+    for key in ("metrics", "training_metrics"):  # the same elites, summed in another order
+        assert deployable[key] == pytest.approx(evaluation[key], rel=1e-12, nan_ok=True)
     assert evaluation["qd_score_se"] >= 0.0 and deployable["qd_score_se"] >= 0.0
     assert (made.runs / "airl0" / "corrected_deployable.pkl").is_file()
     record = json.loads((made.out / "runs" / "airl0" / "record.json").read_text())["provenance"]

@@ -52,6 +52,8 @@ class Record:
         notes: remarks the report made on the run.
         method: the run's method label in the report (``--label`` or the recipe's), so that
             a report remade from records groups the runs as the original did.
+        deployable: final metrics of the deployable archive (empty where none).
+        deployable_source: where they came from.
     """
 
     iteration: int | None
@@ -60,6 +62,8 @@ class Record:
     archive: GridArchive
     notes: list[str] = field(default_factory=list)
     method: str | None = None
+    deployable: dict[str, float] = field(default_factory=dict)
+    deployable_source: str = ""
 
 
 class RecordError(ValueError):
@@ -104,6 +108,7 @@ def write_record(run_dir: Path, record: Record, dest: Path) -> Path:
         "iteration": record.iteration,
         "source": record.source,
         "metrics": record.metrics,
+        "deployable": {"source": record.deployable_source, "metrics": record.deployable},
         "notes": [note for note in record.notes if not note.startswith("seed ")],
         "method": record.method,
         "dims": [int(d) for d in archive.dims],
@@ -171,6 +176,17 @@ def read_record(path: Path) -> Record:
     archive = GridArchive(solution_dim=1, dims=dims, ranges=[tuple(r) for r in ranges])
     if len(values):
         archive.add(np.zeros((len(values), 1)), values[:, 1], values[:, 2:])
-    source = f"{summary.get('source', '?')}; from the record of {summary.get('origin', '?')}"
+    origin = f"from the record of {summary.get('origin', '?')}"
+    source = f"{summary.get('source', '?')}; {origin}"
     notes = summary.get("notes", [])
-    return Record(summary.get("iteration"), source, metrics, archive, notes, summary.get("method"))
+    deployable = summary.get("deployable") or {}  # records of before the deployable archive
+    return Record(
+        summary.get("iteration"),
+        source,
+        metrics,
+        archive,
+        notes,
+        summary.get("method"),
+        {key: float(value) for key, value in (deployable.get("metrics") or {}).items()},
+        f"{deployable['source']}; {origin}" if deployable.get("metrics") else "",
+    )

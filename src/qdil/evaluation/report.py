@@ -24,7 +24,9 @@ checkpoint; the run list says which source each run used. Learning curves come f
 QD-Score (PPGA's convention, :data:`qdil.qd.archives.QD_OFFSETS`).
 
 Files written into the output folder: ``report.md`` and ``report.html`` (everything on one
-page), ``table.md`` / ``table.csv`` (main table), ``tukey.md`` / ``tukey.csv``,
+page), ``table.md`` / ``table.csv`` (main table, the true-keyed archives),
+``table_deployable.md`` / ``table_deployable.csv`` (the same of the deployable archives),
+``tukey.md`` / ``tukey.csv``,
 ``runs.csv`` (every run, its status and final metrics), ``profile.csv`` (the return
 profiles' table, :mod:`qdil.evaluation.profiles`), ``heatmaps/*.png``, ``curves/*.png``,
 ``profiles/*.png`` and ``runs/`` (a record of every included run, :mod:`qdil.evaluation.records`:
@@ -154,7 +156,16 @@ def keep_records(runs: Iterable[RunResult], folder: Path) -> list[str]:
             name = f"{run.path.name}-{n}"
         names.add(name)
         assert run.archive is not None  # every included run has its final archive
-        record = Record(run.iteration, run.source, run.metrics, run.archive, run.notes, run.method)
+        record = Record(
+            run.iteration,
+            run.source,
+            run.metrics,
+            run.archive,
+            run.notes,
+            run.method,
+            run.deployable,
+            run.deployable_source,
+        )
         write_record(run.path, record, folder / name)
         written.append(f"{folder.name}/{name}")
     return written
@@ -172,6 +183,10 @@ def _write_files(
     records = table_records(groups)
     header = list(records[0]) if records else ["task", "method", "n"]
     write_csv(out / "table.csv", records, header)
+    write_csv(out / "table_deployable.csv", table_records(groups, "deployable"), header)
+    (out / "table_deployable.md").write_text(
+        doc.markdown_table(*main_table(groups, "deployable")) + "\n" if groups else "\n"
+    )
     tukey_header, tukey_rows = tukey_table(report.tukey)
     notes = [f"- {t}: {n}" for t, res in report.tukey.items() for n in res.notes]
     tukey_md = doc.markdown_table(tukey_header, tukey_rows) if tukey_rows else "No pair tested."
@@ -186,6 +201,7 @@ def _write_files(
     (out / "report.md").write_text(doc.to_markdown(blocks))
     (out / "report.html").write_text(doc.to_html(blocks, "qdil report"))
     written = ["report.md", "report.html", "table.md", "table.csv", "tukey.md", "tukey.csv"]
+    written += ["table_deployable.md", "table_deployable.csv"]
     written += ["runs.csv", "profile.csv", *heatmaps.values(), *profiles.values()]
     written += [path for images in curves.values() for _, path in images]
     report.files = written

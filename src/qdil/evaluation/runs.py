@@ -17,7 +17,10 @@ Which runs go in:
 Which numbers: a run's final metrics come from the corrected archive of ``qdil eval``
 (``eval.json`` and ``corrected_archive.pkl``, decision D12) when it exists and was made from
 the run's current checkpoint, otherwise from the training true-return archive of the
-checkpoint; :attr:`RunResult.source` says which. Learning curves come from ``metrics.csv``.
+checkpoint; :attr:`RunResult.source` says which. The deployable archive's metrics come the
+same way from ``eval.json``'s ``deployable`` part or from the checkpoint's deployable
+archive scored by its elites' true returns (:attr:`RunResult.deployable`). Learning curves
+come from ``metrics.csv``.
 """
 
 from __future__ import annotations
@@ -39,7 +42,7 @@ from ribs.archives import GridArchive
 from qdil.evaluation.records import RecordError, is_record, read_record
 from qdil.evaluation.rescore import CORRECTED, EVAL_JSON
 from qdil.files import CONFIG_NAME
-from qdil.qd.archives import QD_OFFSETS, qd_metrics
+from qdil.qd.archives import QD_OFFSETS, qd_metrics, true_keyed
 from qdil.qd.checkpoint import CheckpointError, load_archive
 
 METRICS_NAME = "metrics.csv"
@@ -82,6 +85,8 @@ class RunResult:
         curves: ``metrics.csv`` column -> ``(iterations, values)``, each of shape ``(T,)``.
         problems: why the run is left out (empty if it is included).
         notes: remarks on an included run (unfinished, stale ``eval.json``, ...).
+        deployable: final metrics of the deployable archive (empty where the run has none).
+        deployable_source: where they come from.
     """
 
     path: Path
@@ -97,6 +102,8 @@ class RunResult:
     curves: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
     problems: list[str] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
+    deployable: dict[str, float] = field(default_factory=dict)
+    deployable_source: str = ""
 
     @property
     def included(self) -> bool:
@@ -255,6 +262,7 @@ def _final_archive(run: RunResult, label: str | None = None) -> None:
         run.iteration, run.source, run.metrics = record.iteration, record.source, record.metrics
         run.archive = record.archive
         run.notes.extend(record.notes)
+        run.deployable, run.deployable_source = record.deployable, record.deployable_source
         return
     try:
         archive, run.iteration = load_archive(run.path, "true")
@@ -264,6 +272,7 @@ def _final_archive(run: RunResult, label: str | None = None) -> None:
     offset = QD_OFFSETS.get(run.task or "", 0.0)
     run.metrics = qd_metrics(archive, offset)
     run.source = f"training archive (checkpoint, iteration {run.iteration})"
+    _training_deployable(run, offset)
     eval_path, corrected_path = run.path / EVAL_JSON, run.path / CORRECTED
     if not eval_path.exists():
         run.archive = light_copy(archive)
@@ -285,12 +294,26 @@ def _final_archive(run: RunResult, label: str | None = None) -> None:
     run.metrics = metrics
     episodes = summary.get("episodes_per_elite", "?")
     run.source = f"corrected (qdil eval, {episodes} episodes/elite, iteration {run.iteration})"
+    if summary.get("deployable"):
+        run.deployable = {k: float(v) for k, v in summary["deployable"]["metrics"].items()}
+        run.deployable_source = run.source
     if corrected_path.exists():
         with open(corrected_path, "rb") as file:
             archive = pickle.load(file)  # our own file, written by qdil eval
     else:
         run.notes.append(f"no {CORRECTED}: heatmap shows the training archive")
     run.archive = light_copy(archive)
+
+
+def _training_deployable(run: RunResult, offset: float) -> None:
+    """The deployable archive's metrics by its elites' training true returns, if it has one."""
+    try:
+        deployable, _ = load_archive(run.path, "deployable")
+    except CheckpointError:
+        run.notes.append("no deployable archive (its checkpoint predates it)")
+        return
+    run.deployable = qd_metrics(true_keyed(deployable), offset)
+    run.deployable_source = run.source
 
 
 def load_run(path: Path, label: str | None = None) -> RunResult:

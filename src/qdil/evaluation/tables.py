@@ -37,9 +37,16 @@ TABLE_METRICS: tuple[tuple[str, str, str, float], ...] = (
 """(metric key, column title, number style, scale) of the main table."""
 
 
-def metric_values(runs: Sequence[RunResult], key: str, scale: float = 1.0) -> np.ndarray:
-    """One final metric of each run, shape ``(len(runs),)``."""
-    return np.array([scale * run.metrics.get(key, math.nan) for run in runs], dtype=np.float64)
+ARCHIVES = {"true": "true-keyed (paper)", "deployable": "deployable"}
+"""The policy archives a report tables: :attr:`RunResult.metrics` and ``.deployable``."""
+
+
+def metric_values(
+    runs: Sequence[RunResult], key: str, scale: float = 1.0, archive: str = "true"
+) -> np.ndarray:
+    """One final metric of each run's ``true`` or ``deployable`` archive, shape ``(len(runs),)``."""
+    found = [run.metrics if archive == "true" else run.deployable for run in runs]
+    return np.array([scale * metrics.get(key, math.nan) for metrics in found], dtype=np.float64)
 
 
 def _short(task: str) -> str:
@@ -53,8 +60,12 @@ def _count(runs: Sequence[RunResult]) -> str:
     return f"{len(runs)}*" if any(run.unfinished for run in runs) else str(len(runs))
 
 
-def main_table(groups: Groups) -> tuple[list[str], list[list[str]]]:
+def main_table(groups: Groups, archive: str = "true") -> tuple[list[str], list[list[str]]]:
     """The paper's main table: rows = methods, per task n, QD-Score, Cov(%), Best, Avg.
+
+    Args:
+        groups: included runs by task and method.
+        archive: ``true`` (the paper's true-keyed archives) or ``deployable``.
 
     Returns:
         Header and rows of text cells (``mean ± std`` over seeds; ``n`` has a ``*`` when the
@@ -72,8 +83,9 @@ def main_table(groups: Groups) -> tuple[list[str], list[list[str]]]:
             runs = runs_by_method.get(method, [])
             row.append(_count(runs))
             for key, _, style, scale in columns:
-                cell = format_mean_std(summarize(metric_values(runs, key, scale)), style)
-                row.append(cell if runs else "–")
+                values = metric_values(runs, key, scale, archive)
+                cell = format_mean_std(summarize(values), style)
+                row.append(cell if runs and not np.isnan(values).all() else "–")
         rows.append(row)
     return header, rows
 
@@ -100,8 +112,13 @@ def _methods(groups: Groups) -> list[str]:
     return sorted(methods, key=lambda m: (not m.startswith(first), m.lower()))
 
 
-def table_records(groups: Groups) -> list[dict[str, Any]]:
-    """One record per task × method with mean, std and n of every table metric (CSV rows)."""
+def table_records(groups: Groups, archive: str = "true") -> list[dict[str, Any]]:
+    """One record per task × method with mean, std and n of every table metric (CSV rows).
+
+    Args:
+        groups: included runs by task and method.
+        archive: ``true`` or ``deployable`` (runs without one count as NaN).
+    """
     records = []
     for task, runs_by_method in groups.items():
         for method, runs in runs_by_method.items():
@@ -115,7 +132,7 @@ def table_records(groups: Groups) -> list[dict[str, Any]]:
             }
             for key, _, _, scale in TABLE_METRICS:
                 name = "coverage_pct" if key == "coverage" else key
-                summary = summarize(metric_values(runs, key, scale))
+                summary = summarize(metric_values(runs, key, scale, archive))
                 record[f"{name}_mean"], record[f"{name}_std"] = summary.mean, summary.std
             records.append(record)
     return records
@@ -224,6 +241,11 @@ def run_records(runs: Sequence[RunResult]) -> list[dict[str, Any]]:
         for key, _, _, scale in (*TABLE_METRICS, ("num_elites", "", "", 1.0)):
             name = "coverage_pct" if key == "coverage" else key
             record[name] = scale * run.metrics[key] if key in run.metrics else ""
+        for key, _, _, scale in (*TABLE_METRICS, ("num_elites", "", "", 1.0)):
+            name = "coverage_pct" if key == "coverage" else key
+            value = run.deployable.get(key)
+            record[f"deployable_{name}"] = "" if value is None else scale * value
+        record["deployable_source"] = run.deployable_source
         records.append(record)
     return records
 
