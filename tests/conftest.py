@@ -10,11 +10,31 @@ os.environ.setdefault("WANDB_MODE", "disabled")
 os.environ.setdefault("QDIL_NUM_THREADS", "1")
 os.environ.setdefault("WANDB_SILENT", "true")
 
+import numba
 import numpy as np
 import pytest
 import torch
 
+
+@numba.njit(parallel=True)
+def _parallel_sum(x: np.ndarray) -> float:  # pragma: no cover - numba
+    total = 0.0
+    for i in numba.prange(x.shape[0]):
+        total += x[i]
+    return total
+
+
+# numba's OpenMP pool, when it first runs a parallel kernel, sets the OpenMP thread count that
+# torch shares to every core; torch's reductions over many numbers split by that count. Start
+# the pool now, so that no test's numbers depend on whether an earlier test stepped physics.
+_parallel_sum(np.ones(64))
 torch.set_num_threads(1)
+
+
+@pytest.fixture(autouse=True)
+def one_torch_thread() -> None:
+    """Every test starts with one torch thread (in-process workers set their own)."""
+    torch.set_num_threads(1)
 
 
 @pytest.fixture
