@@ -11,7 +11,11 @@ takes the next. Start one slot per core, each in its own session group::
     python benchmarks/evidence_runs.py status
 
 A killed slot leaves its run at its last checkpoint (every 10 iterations); the next slot
-that takes the run continues it bit for bit.
+that takes the run continues it bit for bit. A run whose record a report keeps under
+``docs/reports/evidence-<task>/runs/`` is done, on any machine::
+
+    qdil report runs/evidence/halfcheetah_* docs/reports/evidence-halfcheetah/runs \
+        --out docs/reports/evidence-halfcheetah
 """
 
 from __future__ import annotations
@@ -26,6 +30,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = Path("runs") / "evidence"
+REPORTS = ROOT / "docs" / "reports"
 EPISODES = {"HalfCheetah-v5": 5, "Walker2d-v5": 5, "Humanoid-v5": 5}
 """Re-scoring episodes per elite (the protocol's rule for raising them: its page)."""
 
@@ -58,9 +63,17 @@ QUEUE = _runs("HalfCheetah-v5", "halfcheetah", ("mcwae", "gail", "ppga"), range(
 )
 
 
+def recorded(run: Planned) -> bool:
+    """Whether a report keeps the run's re-scored record (``docs/reports/evidence-*``)."""
+    task = run.task.split("-v")[0].lower()
+    return (REPORTS / f"evidence-{task}" / "runs" / run.name / "eval.json").is_file()
+
+
 def progress(run: Planned) -> tuple[int, bool]:
     """Iterations logged and whether ``qdil eval`` re-scored the run's last checkpoint."""
     folder = OUT / run.name
+    if recorded(run):
+        return run.iterations, True
     logged = 0
     if (folder / "metrics.csv").is_file():
         with open(folder / "metrics.csv", newline="") as file:
