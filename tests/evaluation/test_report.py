@@ -523,6 +523,24 @@ def test_the_deployable_archives_are_tabled_beside_the_true_keyed_ones(
     assert rows["true2"]["deployable_source"].startswith("training archive")
 
 
+def test_ratios_to_the_expert_are_ratios_of_the_runs_means(made: SimpleNamespace) -> None:
+    runs = [r for r in read_csv(made.out / "runs.csv") if r["status"].startswith("included")]
+    ratios = read_csv(made.out / "ratios.csv")
+    assert {r["archive"] for r in ratios} == {"true", "deployable"}
+    by_name = {(r["archive"], r["ratio"]): r for r in ratios}
+    for archive, column in (("true", "qd_score"), ("deployable", "deployable_qd_score")):
+        means = {
+            method: np.mean([float(r[column]) for r in runs if r["method"] == method])
+            for method in ("AIRL-Bonus", "PPGA-trueReward")
+        }
+        row = by_name[(archive, "AIRL-Bonus / PPGA-trueReward")]
+        assert float(row["value"]) == pytest.approx(means["AIRL-Bonus"] / means["PPGA-trueReward"])
+        assert float(row["low"]) <= float(row["value"]) <= float(row["high"]) and row["n"] == "3/3"
+    single = by_name[("true", "GIRIL / PPGA-trueReward")]
+    assert single["n"] == "1/3" and single["low"] == "nan" and single["seeds_to_resolve"] == ""
+    assert "Ratios to the expert and to GAIL" in (made.out / "report.md").read_text()
+
+
 def test_eval_json_and_records_say_which_code_and_settings_made_them(
     made: SimpleNamespace,
 ) -> None:

@@ -26,7 +26,8 @@ QD-Score (PPGA's convention, :data:`qdil.qd.archives.QD_OFFSETS`).
 Files written into the output folder: ``report.md`` and ``report.html`` (everything on one
 page), ``table.md`` / ``table.csv`` (main table, the true-keyed archives),
 ``table_deployable.md`` / ``table_deployable.csv`` (the same of the deployable archives),
-``tukey.md`` / ``tukey.csv``,
+``tukey.md`` / ``tukey.csv``, ``ratios.csv`` (every method's QD-Score over the expert's
+and GAIL's, with bootstrap intervals and the seeds a gap would need),
 ``runs.csv`` (every run, its status and final metrics), ``profile.csv`` (the return
 profiles' table, :mod:`qdil.evaluation.profiles`), ``heatmaps/*.png``, ``curves/*.png``,
 ``profiles/*.png`` and ``runs/`` (a record of every included run, :mod:`qdil.evaluation.records`:
@@ -66,6 +67,7 @@ from qdil.evaluation.tables import (
     main_table,
     metric_values,
     offset_table,
+    ratio_records,
     run_records,
     table_records,
     tukey_records,
@@ -193,6 +195,8 @@ def _write_files(
     (out / "tukey.md").write_text(tukey_md + "\n\n" + "\n".join(notes) + "\n")
     fields = ["task", "group1", "group2", "n1", "n2", "mean1", "mean2", "diff", "sign"]
     write_csv(out / "tukey.csv", tukey_records(report.tukey), [*fields, "pvalue", "significant"])
+    ratio_fields = ["task", "archive", "ratio", "value", "low", "high", "n", "seeds_to_resolve"]
+    write_csv(out / "ratios.csv", ratio_records(groups), ratio_fields)
     run_rows = run_records(report.runs)
     write_csv(out / "runs.csv", run_rows, list(run_rows[0]) if run_rows else ["path"])
     profile_fields = ["task", "method", "return_at_least", "cells_pct_mean", "cells_pct_std", "n"]
@@ -201,7 +205,7 @@ def _write_files(
     (out / "report.md").write_text(doc.to_markdown(blocks))
     (out / "report.html").write_text(doc.to_html(blocks, "qdil report"))
     written = ["report.md", "report.html", "table.md", "table.csv", "tukey.md", "tukey.csv"]
-    written += ["table_deployable.md", "table_deployable.csv"]
+    written += ["table_deployable.md", "table_deployable.csv", "ratios.csv"]
     written += ["runs.csv", "profile.csv", *heatmaps.values(), *profiles.values()]
     written += [path for images in curves.values() for _, path in images]
     report.files = written

@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from qdil.evaluation.ratios import ratio_of_means, seeds_to_resolve
 from qdil.evaluation.runs import (
     DISPLAY_NAMES,
     Groups,
@@ -136,6 +137,61 @@ def table_records(groups: Groups, archive: str = "true") -> list[dict[str, Any]]
                 record[f"{name}_mean"], record[f"{name}_std"] = summary.mean, summary.std
             records.append(record)
     return records
+
+
+RATIO_REFERENCES = (DISPLAY_NAMES["true_reward"], DISPLAY_NAMES["gail"])
+"""The methods every other method's QD-Score is divided by: the expert and GAIL."""
+
+
+def ratio_records(groups: Groups) -> list[dict[str, Any]]:
+    """Raw QD-Score ratios of every method to the expert and to GAIL, both archives.
+
+    One convention: the ratio of the means over seeds, with a 95 % bootstrap interval
+    (:func:`qdil.evaluation.ratios.ratio_of_means`), and the seeds per method a t-test
+    would need to find the gap (:func:`qdil.evaluation.ratios.seeds_to_resolve`).
+
+    Returns:
+        One record per task, archive, method and reference present (CSV rows).
+    """
+    records = []
+    for task, runs_by_method in groups.items():
+        for archive in ARCHIVES:
+            for reference in RATIO_REFERENCES:
+                if reference not in runs_by_method:
+                    continue
+                below = metric_values(runs_by_method[reference], "qd_score", 1.0, archive)
+                for method, runs in runs_by_method.items():
+                    above = metric_values(runs, "qd_score", 1.0, archive)
+                    if method == reference or np.isnan(above).all() or np.isnan(below).all():
+                        continue
+                    ratio = ratio_of_means(above, below)
+                    records.append(
+                        {
+                            "task": task,
+                            "archive": archive,
+                            "ratio": f"{method} / {reference}",
+                            "value": ratio.value,
+                            "low": ratio.low,
+                            "high": ratio.high,
+                            "n": f"{ratio.n_numerator}/{ratio.n_denominator}",
+                            "seeds_to_resolve": seeds_to_resolve(above, below),
+                        }
+                    )
+    return records
+
+
+def ratio_table(records: Sequence[Mapping[str, Any]]) -> tuple[list[str], list[list[str]]]:
+    """The ratio records as text: ``0.86 [0.73, 1.03]`` and the seeds a gap would need."""
+    header = ["Task", "Archive", "Ratio of raw QD-Scores", "value [95 % interval]", "n"]
+    header.append("seeds to resolve")
+    rows = []
+    for r in records:
+        cell = f"{r['value']:.2f}"
+        if not math.isnan(r["low"]):
+            cell += f" [{r['low']:.2f}, {r['high']:.2f}]"
+        needed = "–" if r["seeds_to_resolve"] is None else str(r["seeds_to_resolve"])
+        rows.append([_short(r["task"]), ARCHIVES[r["archive"]], r["ratio"], cell, r["n"], needed])
+    return header, rows
 
 
 def tukey_tests(groups: Groups, reference: str | None = None) -> dict[str, TukeyResult]:
