@@ -8,9 +8,9 @@ A run keeps three pyribs ``GridArchive``s over the k foot-contact measures in [0
 - ``true``: a passive MAP-Elites archive of the same solutions keyed on their **true**
   return: the paper's reported archive, an oracle's choice of elites.
 - ``deployable``: a passive MAP-Elites archive keyed on the run's own objective (the learned
-  return as scored when the policy was proposed): the best elite per cell that a user
-  without the true reward gets. Its elites carry their true return as the ``true_return``
-  field, so that the archive is re-scored and reported like ``true``.
+  return as scored when the policy was proposed; the true return for ``qd.fitness: true``):
+  the best elite per cell that a user without the true reward gets. Its elites carry their
+  true return as the ``true_return`` field, so that the archive is reported like ``true``.
 
 Extra fields carried by every elite: its observation statistics (``obs_mean``,
 ``obs_var``, ``obs_count``) and its mean episode length (``length``, for the offset
@@ -115,7 +115,15 @@ class RunArchives:
         measures: np.ndarray,
         fields: dict[str, np.ndarray],
     ) -> None:
-        """Insert solutions into the passive archives (the scheduler fills ``main``)."""
+        """Insert solutions into the passive archives (the scheduler fills ``main``).
+
+        Args:
+            solutions: (P, D) policies.
+            objective: (P,) the run's own objective (the ``main`` archive's).
+            true_objective: (P,) true returns.
+            measures: (P, k) episode measures.
+            fields: :func:`elite_fields` values, each (P, ...).
+        """
         self.true.add(solutions, true_objective, measures, **fields)
         self.deployable.add(solutions, objective, measures, true_return=true_objective, **fields)
 

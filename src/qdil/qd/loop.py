@@ -124,10 +124,9 @@ def qd_iteration(run: Run) -> dict[str, float]:
     )
     timings["mean_evaluate"] = time.perf_counter() - tic_mean
     fields = fields_from_stats(stats, mean_eval.lengths)
-    scheduler.tell_dqd(_objective(run, mean_eval), mean_eval.measures, jacobian, **fields)
-    run.archives.add(
-        theta[None], mean_eval.objective, mean_eval.true_objective, mean_eval.measures, fields
-    )
+    objective = _objective(run, mean_eval)  # the run's own: learned, or true with fitness true
+    scheduler.tell_dqd(objective, mean_eval.measures, jacobian, **fields)
+    run.archives.add(theta[None], objective, mean_eval.true_objective, mean_eval.measures, fields)
 
     # ---- 2. branch, score, insert, adapt the coefficient distribution
     branches = scheduler.ask()
@@ -144,10 +143,9 @@ def qd_iteration(run: Run) -> dict[str, float]:
     timings["evaluate"] = time.perf_counter() - tic_eval
     fields = fields_from_stats(branch_stats, evaluation.lengths)
     restarts = emitter.restarts
-    scheduler.tell(_objective(run, evaluation), evaluation.measures, **fields)
-    run.archives.add(
-        branches, evaluation.objective, evaluation.true_objective, evaluation.measures, fields
-    )
+    objective = _objective(run, evaluation)
+    scheduler.tell(objective, evaluation.measures, **fields)
+    run.archives.add(branches, objective, evaluation.true_objective, evaluation.measures, fields)
 
     # ---- 3. walk θ_μ along the coefficient mean
     tic_walk = time.perf_counter()
