@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import json
 import os
 import subprocess
 import sys
@@ -31,7 +32,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 OUT = Path("runs") / "evidence"
 REPORTS = ROOT / "docs" / "reports"
-EPISODES = {"HalfCheetah-v5": 5, "Walker2d-v5": 5, "Humanoid-v5": 5}
+EPISODES = {"HalfCheetah-v5": 9, "Walker2d-v5": 5, "Humanoid-v5": 5}
 """Re-scoring episodes per elite (the protocol's rule for raising them: its page)."""
 
 
@@ -63,10 +64,16 @@ QUEUE = _runs("HalfCheetah-v5", "halfcheetah", ("mcwae", "gail", "ppga"), range(
 )
 
 
-def recorded(run: Planned) -> bool:
-    """Whether a report keeps the run's re-scored record (``docs/reports/evidence-*``)."""
+def _record(run: Planned) -> Path:
     task = run.task.split("-v")[0].lower()
-    return (REPORTS / f"evidence-{task}" / "runs" / run.name / "eval.json").is_file()
+    return REPORTS / f"evidence-{task}" / "runs" / run.name / "eval.json"
+
+
+def recorded(run: Planned) -> bool:
+    """Whether a report keeps the run's record, re-scored on the task's episodes per elite."""
+    if not _record(run).is_file():
+        return False
+    return json.loads(_record(run).read_text())["episodes_per_elite"] == EPISODES[run.task]
 
 
 def progress(run: Planned) -> tuple[int, bool]:
@@ -125,21 +132,29 @@ def work(run: Planned) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("action", choices=("run", "status"))
+    parser.add_argument("--once", action="store_true", help="stop after one run")
     args = parser.parse_args()
     OUT.mkdir(parents=True, exist_ok=True)
     if args.action == "status":
         for run in QUEUE:
             logged, scored = progress(run)
-            print(f"{run.name:34s} {logged:4d}/{run.iterations} {'re-scored' if scored else ''}")
+            state = "re-scored" if scored else ""
+            if _record(run).is_file() and not scored:
+                state = "recorded on other episodes: to redo"
+            print(f"{run.name:34s} {logged:4d}/{run.iterations} {state}")
         return
     while True:
         todo = [run for run in QUEUE if not progress(run)[1]]
+        # a run recorded on fewer episodes (before the 1 % rule raised them) comes last
+        todo.sort(key=lambda run: _record(run).is_file())
         mine = next((run for run in todo if take(run)), None)
         if mine is None:
             print("nothing left to take", flush=True)
             return
         work(mine)
         (OUT / f"{mine.name}.lock").unlink(missing_ok=True)
+        if args.once:
+            return
 
 
 if __name__ == "__main__":
