@@ -85,7 +85,19 @@ def progress(run: Planned) -> tuple[int, bool]:
     if (folder / "metrics.csv").is_file():
         with open(folder / "metrics.csv", newline="") as file:
             logged = max((int(row["iteration"]) for row in csv.DictReader(file)), default=0)
-    return logged, (folder / "eval.json").is_file()
+    scored = (folder / "eval.json").is_file()
+    if scored:  # scored on the task's episodes, not on fewer from before the 1 % rule
+        episodes = json.loads((folder / "eval.json").read_text())["episodes_per_elite"]
+        scored = episodes == EPISODES[run.task]
+    return logged, scored
+
+
+def _order(run: Planned) -> int:
+    """Cheapest first: a re-scoring alone, then new runs, then runs to redo from scratch."""
+    logged, _ = progress(run)
+    if logged >= run.iterations and (OUT / run.name / "checkpoints" / "last.pt").exists():
+        return 0
+    return 2 if _record(run).is_file() else 1
 
 
 def _alive(pid: int) -> bool:
@@ -145,8 +157,7 @@ def main() -> None:
         return
     while True:
         todo = [run for run in QUEUE if not progress(run)[1]]
-        # a run recorded on fewer episodes (before the 1 % rule raised them) comes last
-        todo.sort(key=lambda run: _record(run).is_file())
+        todo.sort(key=_order)
         mine = next((run for run in todo if take(run)), None)
         if mine is None:
             print("nothing left to take", flush=True)
