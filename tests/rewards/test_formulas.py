@@ -171,3 +171,21 @@ def test_bonus_equals_the_step_by_step_loop_on_random_rollouts() -> None:
         rewards = bonus.predict_reward(rollout, update=True)
         torch.testing.assert_close(rewards, expected.float(), rtol=0, atol=0)
         torch.testing.assert_close(bonus.counts, counts, rtol=0, atol=0)
+
+
+def test_gradient_penalty_draws_its_mixing_weights_where_the_inputs_live() -> None:
+    # on a GPU, u drawn on the CPU met CUDA inputs (found by benchmarks/gpu_check.py on an
+    # H100); the meta device shows the same mismatch without a GPU
+    critic = torch.nn.Linear(3, 1).to("meta")
+    inputs = torch.zeros(4, 3, device="meta")
+    assert gradient_penalty(critic, inputs, inputs).device.type == "meta"
+    # the CPU draws the same u as before, so CPU results keep their bits
+    w = torch.tensor([0.6, 0.8, 0.0])
+    real, fake = torch.randn(8, 3), torch.randn(8, 3)
+    state = torch.get_rng_state()
+    first = gradient_penalty(lambda x: (x @ w) ** 2, real, fake)
+    torch.set_rng_state(state)
+    u = torch.rand((8, 1))
+    mixed = (u * real + (1 - u) * fake).requires_grad_(True)
+    (grad,) = torch.autograd.grad(((mixed @ w) ** 2).sum(), mixed)
+    assert first.item() == ((grad.norm(2, dim=1) - 1).square().mean()).item()

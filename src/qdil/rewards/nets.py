@@ -50,7 +50,8 @@ def gradient_penalty(
         fake: (B, d) policy inputs.
         generator: random source of u.
     """
-    u = torch.rand((real.shape[0], 1), generator=generator, dtype=real.dtype)
+    # drawn by the CPU generator (the same u on every device), used where the inputs live
+    u = torch.rand((real.shape[0], 1), generator=generator, dtype=real.dtype).to(real.device)
     mixed = (u * real.detach() + (1 - u) * fake.detach()).requires_grad_(True)
     scores = critic(mixed)
     (grad,) = torch.autograd.grad(scores.sum(), mixed, create_graph=True)
