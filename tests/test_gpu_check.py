@@ -1,0 +1,53 @@
+"""benchmarks/gpu_check.py, scaled down on Warp's CPU device: every step runs and reports."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("mujoco_warp", reason="the warp extra is not installed")
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _gpu_check():
+    spec = importlib.util.spec_from_file_location("gpu_check", ROOT / "benchmarks" / "gpu_check.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_the_check_runs_every_step_on_the_cpu(tmp_path: Path, monkeypatch) -> None:
+    monkeypatch.chdir(tmp_path)
+    result = _gpu_check().main(["--device", "cpu", "--quick", "--out", str(tmp_path / "out")])
+    assert result["errors"] == {}
+    saved = json.loads((tmp_path / "out" / "gpu_check.json").read_text())
+    assert saved["machine"]["card"] == "Warp CPU device"
+    assert set(saved["throughput"]) == {"6", "24"}
+    assert all(sps > 0 for sps in saved["throughput"].values())
+    # torch counts host syncs on CUDA alone; the rollout still runs and is timed
+    assert saved["syncs"]["syncs"] is None and saved["syncs"]["num_envs"] == 6
+    assert [row["iteration"] for row in saved["iterations"]] == [1, 2]
+    for row in saved["iterations"]:
+        assert {"jacobian_seconds", "walk_seconds", "evaluate_seconds"} <= set(row)
+    # the GPU tests skip without CUDA, and the check says so rather than failing
+    outcomes = saved["tests"]["outcomes"]
+    assert outcomes and set(outcomes.values()) == {"skipped"}
+    table = (tmp_path / "out" / "gpu_check.md").read_text()
+    assert "| 6 |" in table and "| 2 |" in table and "skipped" in table
+
+
+def test_a_failed_step_is_reported_and_the_others_still_run(tmp_path: Path) -> None:
+    result = _gpu_check().main(
+        [
+            *("--device", "cpu", "--quick", "--out", str(tmp_path), "--skip", "throughput,tests"),
+            "--set=--env.num_envs 5",  # not divisible by Walker2d's k + 1 = 3
+        ]
+    )
+    assert "num_envs" in result["errors"]["syncs"] and "num_envs" in result["errors"]["iterations"]
+    assert "Traceback" in result["tracebacks"]["iterations"]
+    assert result["machine"]["card"] == "Warp CPU device"
+    assert "- iterations failed:" in (tmp_path / "gpu_check.md").read_text()
