@@ -597,3 +597,27 @@ def test_an_unreadable_record_is_left_out_with_its_reason(
     (record / "archive.csv").unlink()
     (run,) = collect_runs([record])
     assert run.status == "left out" and "record unreadable" in run.problems[0]
+
+
+def test_eval_and_report_read_each_checkpoint_once(
+    made: SimpleNamespace, tmp_path: Path, monkeypatch
+) -> None:
+    # a paper-scale checkpoint is hundreds of MB: both archives come from one read
+    from qdil.evaluation import runs as runs_module
+    from qdil.evaluation.rescore import rescore_archive
+    from qdil.qd import checkpoint
+
+    reads: list[Path] = []
+    original = checkpoint.read_checkpoint
+
+    def counted(path: Path) -> dict:
+        reads.append(path)
+        return original(path)
+
+    monkeypatch.setattr(checkpoint, "read_checkpoint", counted)
+    run = shutil.copytree(made.runs / "true2", tmp_path / "true2")
+    rescore_archive(run, episodes=1, num_threads=1)
+    assert len(reads) == 1
+    reads.clear()
+    runs_module.load_run(run)
+    assert len(reads) == 1

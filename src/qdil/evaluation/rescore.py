@@ -27,7 +27,7 @@ from qdil.envs.vector import LocomotionVectorEnv
 from qdil.files import CONFIG_NAME, atomic_write
 from qdil.provenance import provenance
 from qdil.qd.archives import QD_OFFSETS, elite_fields, make_grid, qd_metrics, true_keyed
-from qdil.qd.checkpoint import CheckpointError, dumps_compact, load_archive
+from qdil.qd.checkpoint import dumps_compact, load_archive, load_archives
 from qdil.rl.episodes import evaluate_policies
 from qdil.rl.networks import VectorizedActor
 from qdil.rl.normalize import RunningMeanStd
@@ -45,6 +45,7 @@ def rescore(
     seed: int = 0,
     num_threads: int | None = None,
     progress: bool = False,
+    loaded: tuple[GridArchive, int] | None = None,
 ) -> tuple[GridArchive, dict[str, Any]]:
     """Re-evaluate every elite of one of a run's policy archives (no file is written).
 
@@ -56,6 +57,7 @@ def rescore(
         seed: reset seed (elite i's episodes reset with seeds from ``seed + i·episodes``).
         num_threads: physics threads (``None``: every core).
         progress: show a progress bar.
+        loaded: the archive and its iteration, where the caller read the checkpoint already.
 
     Returns:
         The corrected archive, whose elites carry ``return_se`` (the standard error of
@@ -69,7 +71,7 @@ def rescore(
     """
     run_dir = Path(run_dir)
     config = yaml.safe_load((run_dir / CONFIG_NAME).read_text())
-    archive, iteration = load_archive(run_dir, which)
+    archive, iteration = loaded or load_archive(run_dir, which)
     elites = archive.data()
     env_cfg = config["env"]
     rl = (config.get("rl") or {}).get("init_args") or {}
@@ -173,7 +175,8 @@ def rescore_archive(
     run_dir = Path(run_dir)
     task = yaml.safe_load((run_dir / CONFIG_NAME).read_text())["env"]["task"]
     settings = (episodes, batch, seed, num_threads, progress)
-    corrected, found = rescore(run_dir, "true", *settings)
+    archives, iteration = load_archives(run_dir)  # one read of the (large) checkpoint
+    corrected, found = rescore(run_dir, "true", *settings, (archives["true"], iteration))
     summary = {
         "run": str(run_dir),
         "task": task,
@@ -185,11 +188,10 @@ def rescore_archive(
         "deployable": None,
         "provenance": provenance(),
     }
-    try:
-        deployable, summary["deployable"] = rescore(run_dir, "deployable", *settings)
-    except CheckpointError:  # a checkpoint that predates the deployable archive
-        deployable = None
-    else:
+    deployable = archives["deployable"]  # None: a checkpoint that predates it
+    if deployable is not None:
+        loaded = (deployable, iteration)
+        deployable, summary["deployable"] = rescore(run_dir, "deployable", *settings, loaded)
         atomic_write(run_dir / CORRECTED_DEPLOYABLE, lambda f: f.write(dumps_compact(deployable)))
     atomic_write(run_dir / CORRECTED, lambda f: f.write(dumps_compact(corrected)))
     atomic_write(run_dir / EVAL_JSON, lambda f: f.write(json.dumps(summary, indent=1).encode()))

@@ -43,7 +43,7 @@ from qdil.evaluation.records import RecordError, is_record, read_record
 from qdil.evaluation.rescore import CORRECTED, EVAL_JSON
 from qdil.files import CONFIG_NAME
 from qdil.qd.archives import QD_OFFSETS, qd_metrics, true_keyed
-from qdil.qd.checkpoint import CheckpointError, load_archive
+from qdil.qd.checkpoint import CheckpointError, load_archives
 
 METRICS_NAME = "metrics.csv"
 
@@ -265,14 +265,15 @@ def _final_archive(run: RunResult, label: str | None = None) -> None:
         run.deployable, run.deployable_source = record.deployable, record.deployable_source
         return
     try:
-        archive, run.iteration = load_archive(run.path, "true")
+        archives, run.iteration = load_archives(run.path)  # one read of the checkpoint
     except CheckpointError as error:
         run.problems.append(f"no readable checkpoint ({error})")
         return
+    archive = archives["true"]
     offset = QD_OFFSETS.get(run.task or "", 0.0)
     run.metrics = qd_metrics(archive, offset)
     run.source = f"training archive (checkpoint, iteration {run.iteration})"
-    _training_deployable(run, offset)
+    _training_deployable(run, archives["deployable"], offset)
     eval_path, corrected_path = run.path / EVAL_JSON, run.path / CORRECTED
     if not eval_path.exists():
         run.archive = light_copy(archive)
@@ -305,11 +306,9 @@ def _final_archive(run: RunResult, label: str | None = None) -> None:
     run.archive = light_copy(archive)
 
 
-def _training_deployable(run: RunResult, offset: float) -> None:
+def _training_deployable(run: RunResult, deployable: Any, offset: float) -> None:
     """The deployable archive's metrics by its elites' training true returns, if it has one."""
-    try:
-        deployable, _ = load_archive(run.path, "deployable")
-    except CheckpointError:
+    if deployable is None:
         run.notes.append("no deployable archive (its checkpoint predates it)")
         return
     run.deployable = qd_metrics(true_keyed(deployable), offset)

@@ -248,11 +248,18 @@ def load_checkpoint(run: Run, state: dict[str, Any] | None = None) -> None:
     run.reward.load_extra_state(state["reward"]["extra"])
 
 
-def load_archive(run_dir: str | Path, which: str = "true") -> tuple[Any, int]:
-    """An archive of a run's last checkpoint: ``true``, ``deployable`` or ``main`` (CMA-MAE).
+def load_archives(
+    run_dir: str | Path, names: tuple[str, ...] = ("true", "deployable")
+) -> tuple[dict[str, Any], int]:
+    """Archives of a run's last checkpoint, read once: ``true``, ``deployable``, ``main``.
+
+    Args:
+        run_dir: the run directory.
+        names: which archives (``main`` is CMA-MAE's archive).
 
     Returns:
-        The pyribs archive and the iteration it was saved at.
+        The pyribs archives by name and the iteration they were saved at. A ``deployable``
+        archive that the checkpoint predates is ``None``.
 
     Raises:
         CheckpointError: if the run has no readable checkpoint.
@@ -263,14 +270,34 @@ def load_archive(run_dir: str | Path, which: str = "true") -> tuple[Any, int]:
             f"{run_dir}: no checkpoint at {path} (the run stopped before its first one; "
             f"run `qdil fit --resume {run_dir}` to start it over)"
         )
+    unknown = [name for name in names if name not in ("true", "deployable", "main")]
+    if unknown:
+        raise ValueError(f"which must be true, deployable or main, got {unknown[0]!r}")
     state = read_checkpoint(path)
-    if which == "main":
-        return pickle.loads(state["scheduler"]).archive, state["iteration"]
-    if which not in ("true", "deployable"):
-        raise ValueError(f"which must be true, deployable or main, got {which!r}")
-    if f"{which}_archive" not in state:
+    archives: dict[str, Any] = {}
+    for name in names:
+        if name == "main":
+            archives[name] = pickle.loads(state["scheduler"]).archive
+        else:
+            pickled = state.get(f"{name}_archive")
+            archives[name] = None if pickled is None else pickle.loads(pickled)
+    return archives, state["iteration"]
+
+
+def load_archive(run_dir: str | Path, which: str = "true") -> tuple[Any, int]:
+    """An archive of a run's last checkpoint: ``true``, ``deployable`` or ``main`` (CMA-MAE).
+
+    Returns:
+        The pyribs archive and the iteration it was saved at.
+
+    Raises:
+        CheckpointError: if the run has no readable checkpoint, or one without a
+            deployable archive when ``which`` is ``deployable``.
+    """
+    archives, iteration = load_archives(run_dir, (which,))
+    if archives[which] is None:
         raise CheckpointError(
             f"{run_dir}: the checkpoint predates the deployable archive (qdil fit --resume "
             "starts one from the next iteration)"
         )
-    return pickle.loads(state[f"{which}_archive"]), state["iteration"]
+    return archives[which], iteration
