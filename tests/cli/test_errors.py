@@ -178,7 +178,7 @@ def test_bad_inputs_are_clear_errors(
     tmp_path: Path,
 ) -> None:
     monkeypatch.chdir(tmp_path)
-    monkeypatch.setenv("QDIL_PLUGIN_PATH", str(tmp_path / "no-plugins"))
+    monkeypatch.delenv("QDIL_PLUGIN_PATH", raising=False)  # only ./plugins, absent here
     (tmp_path / "empty").mkdir()
     (tmp_path / "file").write_text("not a run\n")
     (tmp_path / "bad.yaml").write_text(BAD_EMITTER)
