@@ -100,6 +100,43 @@ def _rewrite_reward_flag(argv: list[str]) -> list[str]:
     return out
 
 
+def _reward_class(class_path: str) -> type | None:
+    """The class at ``class_path`` (``module.Class``), or None if it does not import."""
+    import importlib
+
+    module, _, name = class_path.rpartition(".")
+    try:
+        return getattr(importlib.import_module(module), name)
+    except (ImportError, AttributeError, ValueError):
+        return None
+
+
+def run_stem(stem: str, recipe: dict, config: Namespace) -> str:
+    """The stem of a new run's default name (``<stem>-seed<seed>``).
+
+    The recipe file's stem, unless the command line replaced the recipe's reward model
+    (``--reward gail``): then the stem's first ``_``-separated part and the registered name
+    of the model that runs, so that the name says what ran: ``walker_mcwae.yaml --reward
+    gail`` gives ``walker_gail`` (a class without a registered name: its name in lower case).
+    A recipe run as it is, or with other options of its own model, keeps its stem.
+
+    Args:
+        stem: the recipe file's stem.
+        recipe: the recipe file's content, reward names resolved to class paths.
+        config: the parsed configuration, command-line overrides applied.
+    """
+    reward = recipe.get("reward")
+    written = reward.get("class_path") if isinstance(reward, dict) else reward
+    running = getattr(config.reward, "class_path", None)
+    if not isinstance(written, str) or not isinstance(running, str) or written == running:
+        return stem
+    cls = _reward_class(running)
+    if cls is None or cls is _reward_class(written):
+        return stem
+    name = getattr(cls, "name", "") or cls.__name__.lower()
+    return f"{stem.split('_', 1)[0]}_{name}"
+
+
 def _help_request(argv: list[str]) -> list[str] | None:
     """The first help flag of ``argv`` with its value (``--help``, ``--reward.help gail``)."""
     for i, arg in enumerate(argv):
@@ -130,9 +167,10 @@ def fit_help(request: list[str]) -> None:
 
 
 def parse_fit(argv: list[str]) -> tuple[Namespace, Path | None, str]:
-    """Parse ``qdil fit`` arguments; returns (config, run dir to resume or None, recipe stem).
+    """Parse ``qdil fit`` arguments; returns (config, run dir to resume or None, name stem).
 
-    The values are checked here, before any run directory exists.
+    The values are checked here, before any run directory exists. The stem of a new run's
+    default name is the recipe's, or says which reward model replaced its own (:func:`run_stem`).
 
     Raises:
         SystemExit: with a message naming the recipe key on a bad recipe.
@@ -188,6 +226,8 @@ def parse_fit(argv: list[str]) -> tuple[Namespace, Path | None, str]:
     problems = check_values(config)
     if problems:
         raise SystemExit("\n".join(f"recipe {base}: {problem}" for problem in problems))
+    if resume_dir is None:
+        stem = run_stem(stem, content, config)
     return config, resume_dir, stem
 
 
