@@ -113,6 +113,26 @@ def test_the_guide_command_line_picks_the_plugin(plugin_folder) -> None:
     assert config.bonus.enabled is False
 
 
+@pytest.mark.parametrize("how", ["registered", "class", "path", "the guide's"])
+def test_reward_help_lists_the_plugins_options(how, plugin_folder, capsys) -> None:
+    from qdil.cli import main
+
+    if how == "the guide's":
+        guide = (REPO / "docs" / "guides" / "write-a-reward-plugin.md").read_text()
+        value = guide.split("--reward.help ", 1)[1].split()[0]
+    else:
+        value = {
+            "registered": NAME,
+            "class": "LeastSquaresGAIL",
+            "path": f"{registry.LOCAL_PACKAGE}.example_reward.LeastSquaresGAIL",
+        }[how]
+    with pytest.raises(SystemExit) as stopped:
+        main(["fit", "--reward.help", value])
+    assert stopped.value.code in (0, None)
+    out = capsys.readouterr().out
+    assert "--reward.hidden" in out and "--reward.gp_weight" in out
+
+
 def test_the_contract_checks_pass_for_the_example(plugin_folder, tmp_path) -> None:
     """The guide's test step, run outside the source tree: it needs only the installed qdil."""
     env = {**os.environ, "QDIL_PLUGIN_PATH": str(plugin_folder)}

@@ -25,7 +25,8 @@ FIT_EPILOG = (
     "--resume continues RUN_DIR from its last checkpoint with the recipe in its config.yaml; "
     "a run that stopped before its first checkpoint starts over in place. Only qd.iterations, "
     "env.num_threads, executor.* and logging.* may differ from the checkpoint's recipe. "
-    "--reward.help NAME (a registered name or class path) lists a reward model's options."
+    "--reward.help NAME (a registered name, class name or class path) lists a reward "
+    "model's options."
 )
 
 
@@ -68,24 +69,35 @@ def fit_parser() -> ArgumentParser:
     return parser
 
 
-def _resolve_reward_names(config: dict) -> dict:
-    """Turn a registered reward name (``reward: gail``) into its class path."""
-    from qdil.rewards import get_reward
+def _named_reward(name: str) -> type:
+    """The reward model registered as ``name``, or whose class is named ``name`` (``GAIL``).
 
+    Raises:
+        ValueError: for neither, listing the registered names.
+    """
+    from qdil.rewards import get_reward, list_rewards
+
+    if name != name.lower():  # registered names are lowercase: a class name
+        classes = {entry.cls for entry in list_rewards() if entry.cls.__name__ == name}
+        if len(classes) == 1:
+            return classes.pop()
+    return get_reward(name)
+
+
+def _resolve_reward_names(config: dict) -> dict:
+    """Turn a registered reward name (``reward: gail``) or class name into its class path."""
     reward = config.get("reward")
     if isinstance(reward, str) and "." not in reward:
-        cls = get_reward(reward)
+        cls = _named_reward(reward)
         config["reward"] = {"class_path": f"{cls.__module__}.{cls.__qualname__}"}
     elif isinstance(reward, dict) and "." not in str(reward.get("class_path", ".")):
-        cls = get_reward(reward["class_path"])
+        cls = _named_reward(reward["class_path"])
         config["reward"] = {**reward, "class_path": f"{cls.__module__}.{cls.__qualname__}"}
     return config
 
 
 def _rewrite_reward_flag(argv: list[str]) -> list[str]:
-    """``--reward gail`` / ``--reward.help gail`` (a registered name) -> the class path."""
-    from qdil.rewards import get_reward
-
+    """``--reward gail`` / ``--reward.help GAIL`` (a registered or class name) -> class path."""
     out = list(argv)
     for i, arg in enumerate(out):
         value = None
@@ -93,8 +105,8 @@ def _rewrite_reward_flag(argv: list[str]) -> list[str]:
             value, index = out[i + 1], i + 1
         elif arg.startswith(("--reward=", "--reward.help=")):
             value, index = arg.split("=", 1)[1], i
-        if value and "." not in value and not value.startswith("{") and value.isidentifier():
-            cls = get_reward(value)
+        if value and "." not in value and value.isidentifier():
+            cls = _named_reward(value)
             path = f"{cls.__module__}.{cls.__qualname__}"
             out[index] = path if index == i + 1 else f"{arg.split('=', 1)[0]}={path}"
     return out
