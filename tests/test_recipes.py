@@ -102,3 +102,11 @@ def test_humanoid_recipes_name_the_file_their_header_tells_how_to_make() -> None
         if config.demos.path is not None:
             assert config.demos.path == "humanoid.npz"
             assert "qdil demos runs/humanoid_ppga-seed0 --out humanoid.npz" in recipe.read_text()
+
+
+def test_the_recipes_page_shows_the_flagship_recipe_as_it_is() -> None:
+    """docs/concepts/recipes.md's first YAML block is recipes/walker_mcwae.yaml, comments aside."""
+    page = (ROOT / "docs" / "concepts" / "recipes.md").read_text()
+    block = page.split("```yaml\n", 1)[1].split("```", 1)[0]
+    flagship = ROOT / "recipes" / "walker_mcwae.yaml"
+    assert yaml.safe_load(block) == yaml.safe_load(flagship.read_text())

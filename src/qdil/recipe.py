@@ -79,7 +79,8 @@ def recipe(
             process) or ``qdil.executors.RayExecutor`` (Ray workers; ``address``,
             ``num_workers``, ``threads_per_worker``). Results do not depend on it.
         seed: the run's seed; every random stream derives from it.
-        name: run name and directory under ``logging.root`` (default: recipe name + seed).
+        name: run name and directory under ``logging.root`` (default: recipe name + seed;
+            with ``--reward`` replacing the recipe's model, that model's name in it).
     """
 
 

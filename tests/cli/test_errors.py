@@ -39,6 +39,11 @@ HELP = {
     "fit": (["fit", "--help"], "--qd.iterations"),
     "fit -h after a recipe": (["fit", str(SMOKE), "-h"], "--logging.checkpoint_every"),
     "fit --reward.help NAME": (["fit", "--reward.help", "gail"], "--reward.gp_weight"),
+    "fit --reward.help CLASS": (["fit", "--reward.help", "GAIL"], "--reward.gp_weight"),
+    "fit --reward.help PATH": (
+        ["fit", "--reward.help=qdil.rewards.builtin.GAIL"],
+        "--reward.gp_weight",
+    ),
     "rewards": (["rewards", "--help"], "list"),
     "rewards list": (["rewards", "list", "--help"], "description and source"),
     "eval": (["eval", "--help"], "--episodes"),
@@ -135,6 +140,14 @@ CASES = {
         ["fit", "{smoke}", "--bonus.type", "ebc", "--bonus.in_fitness", "false"],
         ["bonus.in_fitness applies to bonus.type single_step only"],
     ),
+    "reward class name unknown": (
+        ["fit", "{smoke}", "--reward", "Gial"],
+        ["unknown reward model 'Gial'; registered: airl"],
+    ),
+    "reward.help class name unknown": (
+        ["fit", "--reward.help", "Gial"],
+        ["--reward.help", "unknown reward model 'Gial'; registered: airl"],
+    ),
     "recipe is a directory": (["fit", "{empty}"], ["{empty}", "is a directory"]),
     "emitter in a missing module (recipe)": (
         ["fit", "{bad_recipe}"],
@@ -178,7 +191,7 @@ def test_bad_inputs_are_clear_errors(
     tmp_path: Path,
 ) -> None:
     monkeypatch.chdir(tmp_path)
-    monkeypatch.setenv("QDIL_PLUGIN_PATH", str(tmp_path / "no-plugins"))
+    monkeypatch.delenv("QDIL_PLUGIN_PATH", raising=False)  # only ./plugins, absent here
     (tmp_path / "empty").mkdir()
     (tmp_path / "file").write_text("not a run\n")
     (tmp_path / "bad.yaml").write_text(BAD_EMITTER)

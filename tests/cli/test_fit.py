@@ -20,7 +20,9 @@ SMOKE = ROOT / "recipes" / "smoke" / "walker_true.yaml"
 
 
 def qdil(*args: str, cwd: Path, check: bool = True) -> subprocess.CompletedProcess:
-    env = {**os.environ, "WANDB_MODE": "disabled", "QDIL_PLUGIN_PATH": str(cwd / "no-plugins")}
+    # no plugin folders: cwd has no ./plugins, and the caller's QDIL_PLUGIN_PATH is left out
+    env = {k: v for k, v in os.environ.items() if k != "QDIL_PLUGIN_PATH"}
+    env["WANDB_MODE"] = "disabled"
     return subprocess.run(
         [sys.executable, "-m", "qdil.cli", *args],
         cwd=cwd,

@@ -40,7 +40,7 @@ def test_a_run_killed_before_its_first_checkpoint_starts_over(
 ) -> None:
     """SIGKILL after iteration 1, before the first checkpoint; --resume starts it over."""
     monkeypatch.chdir(tmp_path)
-    monkeypatch.setenv("QDIL_PLUGIN_PATH", str(tmp_path / "no-plugins"))
+    monkeypatch.delenv("QDIL_PLUGIN_PATH", raising=False)  # only ./plugins, absent here
     args = ["--qd.iterations", "2", "--logging.checkpoint_every", "2", "--name", "early"]
     run_dir = Path("runs") / "early"
     process = subprocess.Popen(
@@ -83,7 +83,7 @@ def finished(tmp_path_factory: pytest.TempPathFactory) -> Path:
     root = tmp_path_factory.mktemp("resume")
     with pytest.MonkeyPatch.context() as patch:
         patch.chdir(root)
-        patch.setenv("QDIL_PLUGIN_PATH", str(root / "no-plugins"))
+        patch.delenv("QDIL_PLUGIN_PATH", raising=False)  # only ./plugins, absent here
         main(["fit", str(SMOKE), "--qd.iterations", "1", "--name", "done"])
     return root / "runs" / "done"
 
@@ -109,7 +109,7 @@ def test_resume_after_config_yaml_was_edited_is_refused(
     edit, older: bool, words: list[str], finished: Path, tmp_path: Path, monkeypatch
 ) -> None:
     monkeypatch.chdir(tmp_path)
-    monkeypatch.setenv("QDIL_PLUGIN_PATH", str(tmp_path / "no-plugins"))
+    monkeypatch.delenv("QDIL_PLUGIN_PATH", raising=False)  # only ./plugins, absent here
     run_dir = tmp_path / "edited"
     shutil.copytree(finished, run_dir)
     config_path = run_dir / "config.yaml"
@@ -139,7 +139,7 @@ def test_a_checkpoint_from_before_the_deployable_archive_resumes_and_is_scored(
     from qdil.qd.checkpoint import CheckpointError, load_archive
 
     monkeypatch.chdir(tmp_path)
-    monkeypatch.setenv("QDIL_PLUGIN_PATH", str(tmp_path / "no-plugins"))
+    monkeypatch.delenv("QDIL_PLUGIN_PATH", raising=False)  # only ./plugins, absent here
     run_dir = tmp_path / "older"
     shutil.copytree(finished, run_dir)
     checkpoint = run_dir / "checkpoints" / "last.pt"

@@ -227,3 +227,20 @@ def test_demos_from_a_run_follow_the_papers_pipeline(expert_run, tmp_path, capsy
     main(["demos", "--info", str(out)])
     printed = capsys.readouterr().out
     assert "| Walker2d-v5 | 3 | Length |" in printed and "episode 2: length" in printed
+
+
+def test_a_minari_dataset_not_on_disk_says_how_to_download_it(tmp_path, monkeypatch) -> None:
+    """minari's own error says ``download=True``, an argument no qdil command takes."""
+    pytest.importorskip("minari")
+    from qdil.cli import main
+
+    monkeypatch.setenv("MINARI_DATASETS_PATH", str(tmp_path / "datasets"))
+    dataset = "mujoco/walker2d/expert-v0"
+    with pytest.raises(SystemExit) as stopped:
+        main(["demos", "--import-minari", dataset, "--out", str(tmp_path / "w.npz")])
+    message = str(stopped.value)
+    assert message.startswith("qdil demos: error: Minari dataset 'mujoco/walker2d/expert-v0'")
+    assert f"`minari download {dataset}`" in message
+    assert str(tmp_path / "datasets") in message and "MINARI_DATASETS_PATH" in message
+    assert "download=True" not in message
+    assert not (tmp_path / "w.npz").exists()

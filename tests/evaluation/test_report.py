@@ -274,7 +274,9 @@ def test_find_runs_one_level_down(tmp_path: Path) -> None:
 
 
 def qdil_fit(*args: str, cwd: Path) -> None:
-    env = {**os.environ, "WANDB_MODE": "disabled", "QDIL_PLUGIN_PATH": str(cwd / "no-plugins")}
+    # no plugin folders: cwd has no ./plugins, and the caller's QDIL_PLUGIN_PATH is left out
+    env = {k: v for k, v in os.environ.items() if k != "QDIL_PLUGIN_PATH"}
+    env["WANDB_MODE"] = "disabled"
     subprocess.run(
         [sys.executable, "-m", "qdil.cli", "fit", str(SMOKE), *args],
         cwd=cwd,

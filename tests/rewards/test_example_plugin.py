@@ -113,6 +113,68 @@ def test_the_guide_command_line_picks_the_plugin(plugin_folder) -> None:
     assert config.bonus.enabled is False
 
 
+@pytest.mark.parametrize("how", ["registered", "class", "path", "the guide's"])
+def test_reward_help_lists_the_plugins_options(how, plugin_folder, capsys) -> None:
+    from qdil.cli import main
+
+    if how == "the guide's":
+        guide = (REPO / "docs" / "guides" / "write-a-reward-plugin.md").read_text()
+        value = guide.split("--reward.help ", 1)[1].split()[0]
+    else:
+        value = {
+            "registered": NAME,
+            "class": "LeastSquaresGAIL",
+            "path": f"{registry.LOCAL_PACKAGE}.example_reward.LeastSquaresGAIL",
+        }[how]
+    with pytest.raises(SystemExit) as stopped:
+        main(["fit", "--reward.help", value])
+    assert stopped.value.code in (0, None)
+    out = capsys.readouterr().out
+    assert "--reward.hidden" in out and "--reward.gp_weight" in out
+
+
+def guide_block(start: str) -> str:
+    """The fenced block of the plugin guide that begins with ``start``."""
+    guide = (REPO / "docs" / "guides" / "write-a-reward-plugin.md").read_text()
+    return start + guide.split(f"\n{start}", 1)[1].split("```", 1)[0]
+
+
+def test_the_guide_real_recipe_is_the_flagship_with_lsgail(plugin_folder, tmp_path) -> None:
+    """Section 4's walker_lsgail.yaml: recipes/walker_mcwae.yaml --reward lsgail, no bonus."""
+    import yaml
+
+    from qdil.cli import fit_parser, parse_fit
+
+    recipe = tmp_path / "walker_lsgail.yaml"
+    recipe.write_text(guide_block("```yaml\n# walker_lsgail.yaml").split("\n", 1)[1])
+    flagship = str(REPO / "recipes" / "walker_mcwae.yaml")
+    ours, _, stem = parse_fit([str(recipe)])
+    swapped, _, swapped_stem = parse_fit([flagship, "--reward", NAME, "--bonus.enabled", "false"])
+    assert stem == swapped_stem == "walker_lsgail"  # the run directory the guide names
+    dumped = [yaml.safe_load(fit_parser().dump(c, skip_unset=False)) for c in (ours, swapped)]
+    for config in dumped:
+        assert config["bonus"].pop("enabled") is False
+        config["bonus"].pop("weight")  # the flagship's 0.25, unused without the bonus
+    assert dumped[0] == dumped[1]
+    wide, _, _ = parse_fit(
+        [str(recipe), "--reward.hidden", "[128, 128]", "--reward.gp_weight", "5"]
+    )
+    assert (wide.reward.init_args.hidden, wide.reward.init_args.gp_weight) == ([128, 128], 5.0)
+
+
+def test_the_guide_runs_without_a_source_checkout() -> None:
+    """Its commands use only the files it writes: nothing from recipes/ or docs/."""
+    guide = (REPO / "docs" / "guides" / "write-a-reward-plugin.md").read_text()
+    commands = [block.split("```", 1)[0] for block in guide.split("```bash\n")[1:]]
+    assert commands
+    for block in commands:
+        assert "recipes/" not in block and "docs/" not in block, block
+    assert "mkdir -p my-qdil/plugins" in commands[0]
+    assert "Save this as `plugins/example_reward.py`:\n\n```python\n" in guide
+    for written in ("smoke.yaml", "walker_lsgail.yaml"):
+        assert f"```yaml\n# {written}:" in guide
+
+
 def test_the_contract_checks_pass_for_the_example(plugin_folder, tmp_path) -> None:
     """The guide's test step, run outside the source tree: it needs only the installed qdil."""
     env = {**os.environ, "QDIL_PLUGIN_PATH": str(plugin_folder)}

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 
@@ -73,6 +74,61 @@ def test_local_plugin_folder_is_discovered(clean_registry, tmp_path, monkeypatch
     entry = {e.name: e for e in clean_registry.list_rewards()}["my_reward"]
     assert entry.source == f"local plugin {tmp_path / 'my_reward.py'}"
     assert entry.cls.__module__ == "qdil_local_plugins.my_reward"
+
+
+def test_plugins_and_the_plugin_path_are_both_scanned(
+    clean_registry, tmp_path, monkeypatch
+) -> None:
+    (tmp_path / "plugins").mkdir()
+    (tmp_path / "plugins" / "here.py").write_text(PLUGIN.format(name="here"))
+    (tmp_path / "elsewhere").mkdir()
+    (tmp_path / "elsewhere" / "there.py").write_text(PLUGIN.format(name="there"))
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("QDIL_PLUGIN_PATH", str(tmp_path / "elsewhere"))
+    clean_registry.discover(force=True)
+    sources = {e.name: e.source for e in clean_registry.list_rewards()}
+    assert sources["here"] == f"local plugin {tmp_path / 'plugins' / 'here.py'}"
+    assert sources["there"] == f"local plugin {tmp_path / 'elsewhere' / 'there.py'}"
+
+
+def test_plugins_on_the_path_too_is_scanned_once(clean_registry, tmp_path, monkeypatch) -> None:
+    (tmp_path / "plugins").mkdir()
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv(
+        "QDIL_PLUGIN_PATH", os.pathsep.join(["plugins", "", str(tmp_path / "plugins")])
+    )
+    assert clean_registry.plugin_folders() == [tmp_path / "plugins"]
+
+
+@pytest.mark.parametrize("kind", ["missing", "file"])
+def test_a_plugin_path_folder_that_is_not_there_is_an_error(
+    kind, clean_registry, tmp_path, monkeypatch
+) -> None:
+    """A mistyped folder would otherwise leave its plugins out without a word."""
+    folder = tmp_path / "my-plugins"
+    if kind == "file":
+        folder.write_text("")
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("QDIL_PLUGIN_PATH", os.pathsep.join([str(tmp_path), str(folder)]))
+    what = "is a file, not a folder" if kind == "file" else "does not exist"
+    message = (
+        f"QDIL_PLUGIN_PATH names the plugin folder {folder}, which {what}; create it, correct "
+        "the path, or take it out of QDIL_PLUGIN_PATH (./plugins is scanned without it)"
+    )
+    with pytest.raises(FileNotFoundError) as raised:
+        clean_registry.discover(force=True)
+    assert str(raised.value) == message
+    # through the command line: the message, no traceback
+    env = {**os.environ, "QDIL_PLUGIN_PATH": str(folder)}
+    done = subprocess.run(
+        [sys.executable, "-m", "qdil.cli", "rewards", "list"],
+        cwd=tmp_path,
+        env=env,
+        capture_output=True,
+        text=True,
+    )
+    assert done.returncode == 1
+    assert done.stderr.strip() == f"qdil rewards: error: {message}"
 
 
 def test_duplicate_names_are_an_error(clean_registry, tmp_path, monkeypatch) -> None:

@@ -25,7 +25,8 @@ FIT_EPILOG = (
     "--resume continues RUN_DIR from its last checkpoint with the recipe in its config.yaml; "
     "a run that stopped before its first checkpoint starts over in place. Only qd.iterations, "
     "env.num_threads, executor.* and logging.* may differ from the checkpoint's recipe. "
-    "--reward.help NAME (a registered name or class path) lists a reward model's options."
+    "--reward.help NAME (a registered name, class name or class path) lists a reward "
+    "model's options."
 )
 
 
@@ -68,24 +69,35 @@ def fit_parser() -> ArgumentParser:
     return parser
 
 
-def _resolve_reward_names(config: dict) -> dict:
-    """Turn a registered reward name (``reward: gail``) into its class path."""
-    from qdil.rewards import get_reward
+def _named_reward(name: str) -> type:
+    """The reward model registered as ``name``, or whose class is named ``name`` (``GAIL``).
 
+    Raises:
+        ValueError: for neither, listing the registered names.
+    """
+    from qdil.rewards import get_reward, list_rewards
+
+    if name != name.lower():  # registered names are lowercase: a class name
+        classes = {entry.cls for entry in list_rewards() if entry.cls.__name__ == name}
+        if len(classes) == 1:
+            return classes.pop()
+    return get_reward(name)
+
+
+def _resolve_reward_names(config: dict) -> dict:
+    """Turn a registered reward name (``reward: gail``) or class name into its class path."""
     reward = config.get("reward")
     if isinstance(reward, str) and "." not in reward:
-        cls = get_reward(reward)
+        cls = _named_reward(reward)
         config["reward"] = {"class_path": f"{cls.__module__}.{cls.__qualname__}"}
     elif isinstance(reward, dict) and "." not in str(reward.get("class_path", ".")):
-        cls = get_reward(reward["class_path"])
+        cls = _named_reward(reward["class_path"])
         config["reward"] = {**reward, "class_path": f"{cls.__module__}.{cls.__qualname__}"}
     return config
 
 
 def _rewrite_reward_flag(argv: list[str]) -> list[str]:
-    """``--reward gail`` / ``--reward.help gail`` (a registered name) -> the class path."""
-    from qdil.rewards import get_reward
-
+    """``--reward gail`` / ``--reward.help GAIL`` (a registered or class name) -> class path."""
     out = list(argv)
     for i, arg in enumerate(out):
         value = None
@@ -93,11 +105,48 @@ def _rewrite_reward_flag(argv: list[str]) -> list[str]:
             value, index = out[i + 1], i + 1
         elif arg.startswith(("--reward=", "--reward.help=")):
             value, index = arg.split("=", 1)[1], i
-        if value and "." not in value and not value.startswith("{") and value.isidentifier():
-            cls = get_reward(value)
+        if value and "." not in value and value.isidentifier():
+            cls = _named_reward(value)
             path = f"{cls.__module__}.{cls.__qualname__}"
             out[index] = path if index == i + 1 else f"{arg.split('=', 1)[0]}={path}"
     return out
+
+
+def _reward_class(class_path: str) -> type | None:
+    """The class at ``class_path`` (``module.Class``), or None if it does not import."""
+    import importlib
+
+    module, _, name = class_path.rpartition(".")
+    try:
+        return getattr(importlib.import_module(module), name)
+    except (ImportError, AttributeError, ValueError):
+        return None
+
+
+def run_stem(stem: str, recipe: dict, config: Namespace) -> str:
+    """The stem of a new run's default name (``<stem>-seed<seed>``).
+
+    The recipe file's stem, unless the command line replaced the recipe's reward model
+    (``--reward gail``): then the stem's first ``_``-separated part and the registered name
+    of the model that runs, so that the name says what ran: ``walker_mcwae.yaml --reward
+    gail`` gives ``walker_gail`` (a class without a registered name: its name in lower case).
+    A recipe run as it is, or with other options of its own model, keeps its stem.
+
+    Args:
+        stem: the recipe file's stem.
+        recipe: the recipe file's content, reward names resolved to class paths.
+        config: the parsed configuration, command-line overrides applied.
+    """
+    reward = recipe.get("reward")
+    written = reward.get("class_path") if isinstance(reward, dict) else reward
+    running = getattr(config.reward, "class_path", None)
+    if not isinstance(written, str) or not isinstance(running, str) or written == running:
+        return stem
+    cls = _reward_class(running)
+    if cls is None or cls is _reward_class(written):
+        return stem
+    name = getattr(cls, "name", "") or cls.__name__.lower()
+    return f"{stem.split('_', 1)[0]}_{name}"
 
 
 def _help_request(argv: list[str]) -> list[str] | None:
@@ -130,9 +179,10 @@ def fit_help(request: list[str]) -> None:
 
 
 def parse_fit(argv: list[str]) -> tuple[Namespace, Path | None, str]:
-    """Parse ``qdil fit`` arguments; returns (config, run dir to resume or None, recipe stem).
+    """Parse ``qdil fit`` arguments; returns (config, run dir to resume or None, name stem).
 
-    The values are checked here, before any run directory exists.
+    The values are checked here, before any run directory exists. The stem of a new run's
+    default name is the recipe's, or says which reward model replaced its own (:func:`run_stem`).
 
     Raises:
         SystemExit: with a message naming the recipe key on a bad recipe.
@@ -188,6 +238,8 @@ def parse_fit(argv: list[str]) -> tuple[Namespace, Path | None, str]:
     problems = check_values(config)
     if problems:
         raise SystemExit("\n".join(f"recipe {base}: {problem}" for problem in problems))
+    if resume_dir is None:
+        stem = run_stem(stem, content, config)
     return config, resume_dir, stem
 
 

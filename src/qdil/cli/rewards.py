@@ -10,7 +10,7 @@ def rewards(argv: list[str]) -> None:
     parser = argparse.ArgumentParser(
         prog="qdil rewards",
         description="The reward models qdil knows: built-ins, installed plugins and local "
-        "plugin folders ($QDIL_PLUGIN_PATH, default ./plugins).",
+        "plugin folders (./plugins and the folders on $QDIL_PLUGIN_PATH).",
     )
     commands = parser.add_subparsers(dest="action", metavar="ACTION", required=True)
     commands.add_parser(

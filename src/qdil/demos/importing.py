@@ -168,6 +168,7 @@ def import_minari(
 
     Raises:
         ImportError: if ``minari`` is not installed.
+        FileNotFoundError: if the dataset id is not on disk (the message says how to get it).
         DemoFormatError: if the task cannot be told or the data does not fit it.
     """
     if isinstance(dataset, str):
@@ -175,7 +176,16 @@ def import_minari(
             import minari
         except ImportError as error:
             raise ImportError("importing a Minari dataset needs `pip install minari`") from error
-        dataset = minari.load_dataset(dataset, download=False)
+        try:
+            dataset = minari.load_dataset(dataset, download=False)
+        except FileNotFoundError as error:  # minari's own advice (download=True) is its API's
+            where = minari.storage.get_dataset_path(dataset)
+            raise FileNotFoundError(
+                f"Minari dataset {dataset!r} is not on this machine (looked in {where}); "
+                f"download it first with `minari download {dataset}` (or set "
+                "MINARI_DATASETS_PATH to the folder that holds it), then run the import again. "
+                "qdil never downloads at run time."
+            ) from error
     if task is None:
         spec = getattr(dataset, "env_spec", None)
         task = getattr(spec, "id", None)

@@ -252,7 +252,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         prog="python -m qdil.rewards.contract",
         description="Run qdil's reward-model contract checks on registered models (built-ins, "
-        "installed plugins, and local plugin folders: $QDIL_PLUGIN_PATH or ./plugins).",
+        "installed plugins, and local plugin folders: ./plugins and $QDIL_PLUGIN_PATH).",
     )
     parser.add_argument("names", nargs="+", metavar="NAME", help="registered reward names")
     args = parser.parse_args(argv)
@@ -260,7 +260,8 @@ def main(argv: list[str] | None = None) -> int:
     for name in args.names:
         try:
             get_reward(name)
-        except ValueError as error:  # an unknown name: the message lists the known ones
+        # an unknown name (the message lists the known ones) or a missing plugin folder
+        except (ValueError, FileNotFoundError) as error:
             parser.error(str(error))
         for label, check in CHECKS.items():
             try:

@@ -5,8 +5,8 @@ Three sources, in this order:
 1. built-ins, registered by :func:`register_reward` when :mod:`qdil.rewards` is imported;
 2. installed packages, through the entry-point group ``qdil.rewards`` (each entry point
    names a module to import or a ``RewardModel`` subclass);
-3. a local plugin folder (``./plugins`` by default, or the folders in ``$QDIL_PLUGIN_PATH``):
-   every ``*.py`` file and package directly inside it is imported.
+3. local plugin folders, ``./plugins`` and the folders in ``$QDIL_PLUGIN_PATH``: every ``*.py``
+   file and package directly inside them is imported.
 
 A name registered twice by different classes is an error, wherever they come from.
 """
@@ -115,11 +115,30 @@ def _load_entry_points() -> None:
 
 
 def plugin_folders() -> list[Path]:
-    """Local plugin folders: ``$QDIL_PLUGIN_PATH`` (``os.pathsep``-separated) or ``./plugins``."""
-    configured = os.environ.get("QDIL_PLUGIN_PATH")
-    if configured:
-        return [Path(p) for p in configured.split(os.pathsep) if p]
-    return [Path.cwd() / "plugins"]
+    """Local plugin folders: ``./plugins``, then those of ``$QDIL_PLUGIN_PATH``.
+
+    ``$QDIL_PLUGIN_PATH`` is ``os.pathsep``-separated (``:`` on Linux and macOS, ``;`` on
+    Windows); its folders are scanned as well as ``./plugins``, which may be absent.
+
+    Raises:
+        FileNotFoundError: if a folder on ``$QDIL_PLUGIN_PATH`` does not exist (or is a file):
+            a mistyped path would otherwise leave its plugins out without a word.
+    """
+    folders = [Path.cwd() / "plugins"]
+    for entry in os.environ.get("QDIL_PLUGIN_PATH", "").split(os.pathsep):
+        if not entry:
+            continue
+        folder = Path(entry).expanduser().absolute()
+        if not folder.is_dir():
+            what = "is a file, not a folder" if folder.exists() else "does not exist"
+            raise FileNotFoundError(
+                f"QDIL_PLUGIN_PATH names the plugin folder {folder}, which {what}; create "
+                "it, correct the path, or take it out of QDIL_PLUGIN_PATH (./plugins is "
+                "scanned without it)"
+            )
+        if all(folder.resolve() != known.resolve() for known in folders):
+            folders.append(folder)
+    return folders
 
 
 def _load_folder(folder: Path) -> None:

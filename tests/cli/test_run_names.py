@@ -1,0 +1,76 @@
+"""A new run's default name says which reward model ran (``qdil fit`` parses only, here)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from qdil.cli import parse_fit
+
+ROOT = Path(__file__).resolve().parents[2]
+FLAGSHIP = str(ROOT / "recipes" / "walker_mcwae.yaml")
+SMOKE_IL = str(ROOT / "recipes" / "smoke" / "walker_il.yaml")
+
+
+@pytest.mark.parametrize(
+    ("argv", "stem"),
+    [
+        # recipes as they are, or with options of their own model: the names of today
+        ([FLAGSHIP], "walker_mcwae"),
+        ([FLAGSHIP, "--seed", "3", "--qd.iterations", "1"], "walker_mcwae"),
+        ([FLAGSHIP, "--reward.batch_size", "64"], "walker_mcwae"),
+        ([FLAGSHIP, "--reward", "mcwae_wgail"], "walker_mcwae"),
+        ([FLAGSHIP, "--reward", "qdil.rewards.builtin.MCWAEWGAIL"], "walker_mcwae"),
+        ([SMOKE_IL], "walker_il"),
+        # another model: the recipe's first part and the model's registered name
+        ([FLAGSHIP, "--reward", "gail", "--bonus.enabled", "false"], "walker_gail"),
+        ([FLAGSHIP, "--reward=airl"], "walker_airl"),
+        ([FLAGSHIP, "--reward", "qdil.rewards.builtin.GAIL"], "walker_gail"),
+        ([SMOKE_IL, "--reward", "pwil"], "walker_pwil"),
+    ],
+)
+def test_the_default_name_follows_the_reward_model_that_runs(argv: list[str], stem: str) -> None:
+    _, _, got = parse_fit(argv)
+    assert got == stem
+
+
+def test_a_recipe_without_underscore_keeps_its_name_in_front(tmp_path: Path) -> None:
+    recipe = tmp_path / "smoke.yaml"
+    recipe.write_text(Path(SMOKE_IL).read_text())
+    assert parse_fit([str(recipe)])[2] == "smoke"
+    assert parse_fit([str(recipe), "--reward", "airl"])[2] == "smoke_airl"
+
+
+def test_the_documented_commands_in_order_make_distinct_runs() -> None:
+    """getting-started, recipes.md: the flagship, then another model from the same recipe."""
+    first = parse_fit([FLAGSHIP])
+    second = parse_fit([FLAGSHIP, "--reward", "gail", "--bonus.enabled", "false"])
+    names = {f"{stem}-seed{config.seed}" for config, _, stem in (first, second)}
+    assert names == {"walker_mcwae-seed0", "walker_gail-seed0"}
+
+
+def test_an_explicit_name_wins() -> None:
+    config, _, _ = parse_fit([FLAGSHIP, "--reward", "gail", "--name", "mine"])
+    assert config.name == "mine"
+
+
+def test_fit_makes_the_run_directory_under_that_name(tmp_path: Path, monkeypatch) -> None:
+    """``qdil fit`` itself: stopped at the build, after the name and directory are chosen."""
+    import importlib
+
+    fit_module = importlib.import_module("qdil.cli.fit")
+    seen = {}
+
+    class Built(Exception):
+        pass
+
+    def build(init, name, run_dir, resolved, *, resume):
+        seen.update(name=name, run_dir=run_dir)
+        raise Built
+
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(fit_module, "build", build)
+    with pytest.raises(Built):
+        fit_module.fit([FLAGSHIP, "--reward", "gail", "--bonus.enabled", "false"])
+    assert seen == {"name": "walker_gail-seed0", "run_dir": Path("runs") / "walker_gail-seed0"}
