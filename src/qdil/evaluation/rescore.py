@@ -145,6 +145,15 @@ def rescore(
     return corrected, summary
 
 
+def same_elites(first: GridArchive, second: GridArchive) -> bool:
+    """Whether two archives hold the same elites (solutions, objectives, cells) in one order."""
+    keys = ["index", "solution", "objective", "measures", "obs_mean", "obs_var", "obs_count"]
+    if len(first) != len(second):
+        return False
+    one, other = first.data(keys), second.data(keys)
+    return all(np.array_equal(one[key], other[key]) for key in keys)
+
+
 def rescore_archive(
     run_dir: str | Path,
     episodes: int = 5,
@@ -189,7 +198,14 @@ def rescore_archive(
         "provenance": provenance(),
     }
     deployable = archives["deployable"]  # None: a checkpoint that predates it
-    if deployable is not None:
+    if deployable is not None and same_elites(deployable, archives["true"]):
+        # a run that ranks by the true return keeps the same elites in both archives, in
+        # the same order: their scores would be the same episodes, so they are played once
+        summary["deployable"] = {**found, "learned_metrics": found["training_metrics"]}
+        summary["deployable"]["same_as_true"] = True
+        deployable = corrected
+        atomic_write(run_dir / CORRECTED_DEPLOYABLE, lambda f: f.write(dumps_compact(corrected)))
+    elif deployable is not None:
         loaded = (deployable, iteration)
         deployable, summary["deployable"] = rescore(run_dir, "deployable", *settings, loaded)
         atomic_write(run_dir / CORRECTED_DEPLOYABLE, lambda f: f.write(dumps_compact(deployable)))
