@@ -143,6 +143,20 @@ def test_top_2_writes_one_file_per_elite(run_dir: Path, gl: str, tmp_path: Path,
     assert all(len(frames_of(f)) >= 2 for f in files)
 
 
+def test_one_cell_of_the_deployable_archive(run_dir: Path, gl: str, tmp_path: Path, capsys):
+    from qdil.qd.checkpoint import load_archive
+
+    archive, _ = load_archive(run_dir, "deployable")
+    data = archive.data()
+    cell = tuple(int(i) for i in archive.int_to_grid_index(data["index"][[-1]])[0])
+    out = tmp_path / "one.gif"
+    args = ["render", str(run_dir), "--archive", "deployable", "--cell", *map(str, cell)]
+    code, stdout, err = cli([*args, "--out", str(out), "--width", "64", "--height", "48"], capsys)
+    assert code == 0, err
+    assert f"cell {cell}:" in stdout
+    assert frames_of(out).shape[1:] == (48, 64, 3)
+
+
 def test_an_empty_cell_is_an_error_naming_the_occupied_ones(run_dir: Path, capsys) -> None:
     archive, data = elites(run_dir)
     occupied = {tuple(c) for c in archive.int_to_grid_index(data["index"])}

@@ -99,7 +99,7 @@ def render_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--high-quality",
         action="store_true",
-        help="shadows, floor reflection and anti-aliasing (about 3 times slower with "
+        help="shadows, floor reflection and anti-aliasing (about 10 times slower with "
         "software OpenGL)",
     )
     return parser

@@ -4,9 +4,10 @@ MuJoCo picks its OpenGL backend from ``MUJOCO_GL`` when ``mujoco`` is imported, 
 its platform from ``PYOPENGL_PLATFORM`` when it loads. Where ``MUJOCO_GL`` is unset,
 :func:`use_gl_backend` draws one small frame with ``egl``, then ``osmesa``, each in a child
 process (a backend whose libraries are missing can abort a process), and sets both variables
-to the first that works. Only the standard library is imported here, so that a command can
-choose the backend before ``mujoco`` loads; where ``mujoco`` is loaded already (a notebook, a
-test session), the renderer's context class is pointed at the chosen backend instead.
+to the first that works. Only the standard library is imported here, so that a program can
+choose the backend before ``mujoco`` loads; where ``mujoco`` is loaded already (``qdil
+render`` after its checks, a notebook, a test session), the renderer's context class is
+pointed at the chosen backend instead.
 """
 
 from __future__ import annotations
@@ -60,7 +61,8 @@ def probe(backend: str, timeout: float = 120.0) -> str | None:
     if done.returncode == 0:
         return None
     lines = [line.strip() for line in done.stderr.splitlines() if line.strip()]
-    return (lines[-1] if lines else f"exit status {done.returncode}")[:160]
+    reason = lines[-1] if lines else f"exit status {done.returncode}"
+    return reason if len(reason) <= 160 else reason[:159] + "…"
 
 
 def _bind(backend: str) -> None:

@@ -1,22 +1,12 @@
 """Videos of elites: one deterministic episode per elite, drawn by MuJoCo's renderer.
 
-An elite is replayed as ``qdil eval`` scores it (mean actions, the elite's own observation
-statistics, the reference C backend; :mod:`qdil.evaluation.rescore`). Every ``stride``-th
-state is copied into an ``MjData`` of a copy of the model and drawn by ``mujoco.Renderer``
-from a camera that tracks the torso (gymnasium's distances, 20° above the floor). Drawing
-reads states and writes nothing back, so the episode's return is ``qdil eval``'s for that
-reset seed. Pillow draws the return so far, the step, one marker per foot (lit while it
-touches the floor) and the cell's measures on each frame.
-
-A video holds the reset state and then one frame every ``stride`` env steps, plus the last
-state: ``steps // stride + 1`` frames, one more when ``stride`` does not divide ``steps``.
-``stride`` is chosen so that the video plays in real time near the asked frame rate (Walker2d
-at 30 frames/s: every 4th step of 8 ms, 31.25 frames/s). MP4 is written by ffmpeg (imageio),
-GIF by Pillow, whose frame durations are whole 10 ms.
-
-Software OpenGL (Mesa's llvmpipe) is slow: shadows, the floor's reflection and
-anti-aliasing are off unless ``high_quality`` (at 480×320 on 2 busy cores, about 9 frames/s
-without, 3 with); :mod:`qdil.evaluation.gl` picks the backend.
+An elite is replayed as ``qdil eval`` replays it (:mod:`qdil.evaluation.rescore`); every
+``stride``-th state is copied into an ``MjData`` of a copy of the model and drawn from a
+camera that tracks the torso, so drawing changes nothing in the simulation. Pillow adds the
+return so far, the step, the foot contacts and the cell's measures. A video holds the reset
+state, one frame every ``stride`` env steps and the last state: ``steps // stride + 1``
+frames, one more when ``stride`` does not divide ``steps``. Software OpenGL is slow, so
+shadows, reflections and anti-aliasing wait for ``high_quality`` (docs/guides/videos.md).
 """
 
 from __future__ import annotations
@@ -166,7 +156,7 @@ class VideoWriter:
         self._gif: list[Image.Image] = []
         self._mp4: Any = None
         path.parent.mkdir(parents=True, exist_ok=True)
-        if path.suffix == ".mp4":
+        if path.suffix.lower() == ".mp4":
             import imageio.v2 as imageio
 
             self._mp4 = imageio.get_writer(
