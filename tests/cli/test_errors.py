@@ -34,7 +34,7 @@ def cli(args: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, 
 
 
 HELP = {
-    "qdil": ([], "fit,report,rewards"),
+    "qdil": ([], "fit,render,report,rewards"),
     "qdil --help": (["--help"], "COMMAND --help"),
     "fit": (["fit", "--help"], "--qd.iterations"),
     "fit -h after a recipe": (["fit", str(SMOKE), "-h"], "--logging.checkpoint_every"),
@@ -49,6 +49,7 @@ HELP = {
     "eval": (["eval", "--help"], "--episodes"),
     "report": (["report", "--help"], "--out"),
     "demos": (["demos", "--help"], "--top"),
+    "render": (["render", "--help"], "--cell"),
 }
 
 
@@ -73,7 +74,7 @@ def test_help_of_the_light_commands_imports_no_torch() -> None:
         "import sys\n"
         "from qdil.cli import main\n"
         "for args in ([], ['--help'], ['eval', '--help'], ['report', '--help'],\n"
-        "             ['demos', '--help'], ['rewards', '--help']):\n"
+        "             ['demos', '--help'], ['rewards', '--help'], ['render', '--help']):\n"
         "    try:\n"
         "        main(args)\n"
         "    except SystemExit as exit_:\n"

@@ -10,6 +10,7 @@ import sys
 # uses.
 from qdil.cli.demos import demos
 from qdil.cli.fit import build, fit, fit_parser, parse_fit
+from qdil.cli.render import render
 from qdil.cli.results import evaluate, report
 from qdil.cli.rewards import rewards
 
@@ -23,10 +24,18 @@ EPILOG = """commands:
   qdil eval RUN_DIR                                 re-score an archive on the true reward
   qdil report RUN_DIR... --out DIR                  paper-style tables, tests and figures
   qdil demos RUN_DIR --out FILE | --info FILE       demonstrations from an expert archive
+  qdil render RUN_DIR [--cell I J | --top K]        video of an elite's gait (MP4 or GIF)
 
 `qdil COMMAND --help` lists a command's options."""
 
-COMMANDS = {"fit": fit, "rewards": rewards, "demos": demos, "eval": evaluate, "report": report}
+COMMANDS = {
+    "fit": fit,
+    "rewards": rewards,
+    "demos": demos,
+    "eval": evaluate,
+    "report": report,
+    "render": render,
+}
 
 
 def _is_user_error(error: BaseException) -> bool:
@@ -39,6 +48,9 @@ def _is_user_error(error: BaseException) -> bool:
         return True
     executors = sys.modules.get("qdil.rl.execution")  # e.g. an unreachable Ray cluster
     if executors is not None and isinstance(error, executors.ExecutorError):
+        return True
+    gl = sys.modules.get("qdil.evaluation.gl")  # no OpenGL: the message names the packages
+    if gl is not None and isinstance(error, gl.GLUnavailableError):
         return True
     # an incomplete plugin, or a reward model whose values turned NaN: the message names
     # the model and what to check; a traceback into the loop would only hide it

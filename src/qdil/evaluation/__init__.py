@@ -1,1 +1,1 @@
-"""Evaluation: re-scoring archives, paper-style tables, statistics and figures."""
+"""Evaluation: re-scoring archives, paper-style tables, statistics, figures and videos."""

@@ -15,11 +15,11 @@ the 1,280 elites of a 180-iteration Walker2d run, one episode each, 704,579 env 
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import torch
 import yaml
 from ribs.archives import GridArchive
 
@@ -28,6 +28,7 @@ from qdil.files import CONFIG_NAME, atomic_write
 from qdil.provenance import provenance
 from qdil.qd.archives import QD_OFFSETS, elite_fields, make_grid, qd_metrics, true_keyed
 from qdil.qd.checkpoint import dumps_compact, load_archive, load_archives
+from qdil.qd.loop import stats_from_fields
 from qdil.rl.episodes import evaluate_policies
 from qdil.rl.networks import VectorizedActor
 from qdil.rl.normalize import RunningMeanStd
@@ -35,6 +36,83 @@ from qdil.rl.normalize import RunningMeanStd
 CORRECTED = "corrected_archive.pkl"
 CORRECTED_DEPLOYABLE = "corrected_deployable.pkl"
 EVAL_JSON = "eval.json"
+
+
+@dataclass(frozen=True)
+class ReplaySettings:
+    """How a run's policies are replayed: its task, horizon and actor, from ``config.yaml``.
+
+    Attributes:
+        task: gymnasium task id.
+        max_episode_steps: the run's horizon.
+        task_kwargs: gymnasium keyword arguments of the task.
+        actor_hidden: widths of the actor's hidden layers.
+        obs_clip: bound of normalised observations.
+    """
+
+    task: str
+    max_episode_steps: int
+    task_kwargs: dict[str, Any]
+    actor_hidden: tuple[int, ...]
+    obs_clip: float
+
+    @classmethod
+    def of_run(cls, run_dir: str | Path) -> ReplaySettings:
+        """The settings of the run in ``run_dir`` (its ``env`` and ``rl`` sections)."""
+        config = yaml.safe_load((Path(run_dir) / CONFIG_NAME).read_text())
+        env, rl = config["env"], (config.get("rl") or {}).get("init_args") or {}
+        return cls(
+            task=env["task"],
+            max_episode_steps=int(env.get("max_episode_steps", 1000)),
+            task_kwargs=env.get("task_kwargs") or {},
+            actor_hidden=tuple(rl.get("actor_hidden", (128, 128))),
+            obs_clip=float(rl.get("obs_clip", 10.0)),
+        )
+
+    def make_env(
+        self, num_envs: int, num_threads: int | None = None, max_episode_steps: int | None = None
+    ) -> LocomotionVectorEnv:
+        """The task on the reference C backend, autoreset disabled (episodes are played whole).
+
+        Args:
+            num_envs: simulations N.
+            num_threads: physics threads (``None``: every core).
+            max_episode_steps: horizon (``None``: the run's).
+        """
+        return LocomotionVectorEnv(
+            self.task,
+            num_envs,
+            max_episode_steps=max_episode_steps or self.max_episode_steps,
+            autoreset_mode="Disabled",
+            num_threads=num_threads,
+            **self.task_kwargs,
+        )
+
+
+def elite_policies(
+    elites: dict[str, np.ndarray],
+    rows: np.ndarray,
+    env: LocomotionVectorEnv,
+    actor_hidden: tuple[int, ...],
+) -> tuple[VectorizedActor, RunningMeanStd]:
+    """The policies of archive rows ``rows`` with their own observation statistics.
+
+    Args:
+        elites: pyribs archive data with ``solution`` (n, D), ``obs_mean`` (n, obs_dim),
+            ``obs_var`` (n, obs_dim) and ``obs_count`` (n,).
+        rows: (P,) rows to rebuild.
+        env: the task (for the observation and action sizes).
+        actor_hidden: widths of the actor's hidden layers.
+
+    Returns:
+        P actors and their (P, obs_dim) statistics.
+    """
+    obs_dim = env.single_observation_space.shape[0]
+    action_dim = env.single_action_space.shape[0]
+    actor = VectorizedActor(len(rows), obs_dim, action_dim, actor_hidden)
+    actor.set_solutions(elites["solution"][rows])
+    fields = {key: elites[key][rows] for key in ("obs_mean", "obs_var", "obs_count")}
+    return actor, stats_from_fields(fields)
 
 
 def rescore(
@@ -69,26 +147,13 @@ def rescore(
     Raises:
         CheckpointError: the run has no checkpoint, or one without this archive.
     """
-    run_dir = Path(run_dir)
-    config = yaml.safe_load((run_dir / CONFIG_NAME).read_text())
+    settings = ReplaySettings.of_run(run_dir)
     archive, iteration = loaded or load_archive(run_dir, which)
     elites = archive.data()
-    env_cfg = config["env"]
-    rl = (config.get("rl") or {}).get("init_args") or {}
-    hidden = tuple(rl.get("actor_hidden", (128, 128)))
-    obs_clip = float(rl.get("obs_clip", 10.0))
     count = len(elites["objective"])
     width = min(batch, max(count, 1))
-    env = LocomotionVectorEnv(
-        env_cfg["task"],
-        width * episodes,
-        max_episode_steps=int(env_cfg.get("max_episode_steps", 1000)),
-        autoreset_mode="Disabled",
-        num_threads=num_threads,
-        **(env_cfg.get("task_kwargs") or {}),
-    )
+    env = settings.make_env(width * episodes, num_threads)
     obs_dim = env.single_observation_space.shape[0]
-    action_dim = env.single_action_space.shape[0]
     objective, measures, lengths = np.zeros(count), np.zeros((count, env.num_feet)), np.zeros(count)
     spread = np.zeros(count)
     steps = 0
@@ -98,13 +163,10 @@ def rescore(
         range(0, count, width), disable=not progress, desc=f"re-evaluating {which}", unit="batch"
     ):
         rows = np.arange(start, min(start + width, count))
-        actor = VectorizedActor(len(rows), obs_dim, action_dim, hidden)
-        actor.set_solutions(elites["solution"][rows])
-        stats = RunningMeanStd.__new__(RunningMeanStd)
-        stats.mean = torch.as_tensor(elites["obs_mean"][rows])
-        stats.var = torch.as_tensor(elites["obs_var"][rows])
-        stats.count = torch.as_tensor(elites["obs_count"][rows])
-        result = evaluate_policies(env, actor, stats, episodes, seed + start, None, True, obs_clip)
+        actor, stats = elite_policies(elites, rows, env, settings.actor_hidden)
+        result = evaluate_policies(
+            env, actor, stats, episodes, seed + start, None, True, settings.obs_clip
+        )
         objective[rows], measures[rows], lengths[rows] = (
             result.true_objective,
             result.measures,
@@ -128,7 +190,7 @@ def rescore(
             length=lengths,
             return_se=spread / np.sqrt(episodes),
         )
-    offset = QD_OFFSETS.get(env_cfg["task"], 0.0)
+    offset = QD_OFFSETS.get(settings.task, 0.0)
     kept_se = corrected.data(["return_se"])["return_se"]
     summary = {
         "iteration": iteration,

@@ -47,7 +47,9 @@ class EpisodePlayer:
     """Plays one episode on each of the first ``used`` simulations of a ``DISABLED`` env.
 
     Each :meth:`step` steps the simulations whose episode still runs; finished ones sit
-    out (a step after all finished only records). Episode results are kept per slot.
+    out (a step after all finished only records). Episode results are kept per slot, and
+    the last step's rewards and foot contacts of every slot in :attr:`last_rewards` (used,)
+    and :attr:`contacts` (used, k), for a caller that follows the episodes step by step.
 
     Args:
         env: an environment with ``autoreset_mode=DISABLED`` and at least ``used`` slots.
@@ -69,6 +71,7 @@ class EpisodePlayer:
         self.contacts = torch.from_numpy(info["foot_contact"][:used])
         self.action_map = ActionMap(env.single_action_space.low, env.single_action_space.high)
         self.returns, self.lengths = np.zeros(used), np.zeros(used)
+        self.last_rewards = np.zeros(used)
         self.measures = np.zeros((used, env.num_feet))
         self.steps: list[dict[str, torch.Tensor]] = []
         self.env_steps = 0
@@ -89,6 +92,7 @@ class EpisodePlayer:
         active = self.running.copy()
         next_obs, reward, terminated, truncated, info = env.step(self._actions, mask=active)
         self.env_steps += int(active.sum())
+        self.last_rewards = reward[:used]  # 0 for slots that sat out
         done = (terminated | truncated)[:used]
         if done.any():
             ended = info["episode"]["_r"][:used]
