@@ -259,18 +259,20 @@ def rescore_archive(
         "deployable": None,
         "provenance": provenance(),
     }
+    corrected_bytes = dumps_compact(corrected)
     deployable = archives["deployable"]  # None: a checkpoint that predates it
-    if deployable is not None and same_elites(deployable, archives["true"]):
-        # a run that ranks by the true return keeps the same elites in both archives, in
-        # the same order: their scores would be the same episodes, so they are played once
-        summary["deployable"] = {**found, "learned_metrics": found["training_metrics"]}
-        summary["deployable"]["same_as_true"] = True
-        deployable = corrected
-        atomic_write(run_dir / CORRECTED_DEPLOYABLE, lambda f: f.write(dumps_compact(corrected)))
-    elif deployable is not None:
-        loaded = (deployable, iteration)
-        deployable, summary["deployable"] = rescore(run_dir, "deployable", *settings, loaded)
-        atomic_write(run_dir / CORRECTED_DEPLOYABLE, lambda f: f.write(dumps_compact(deployable)))
-    atomic_write(run_dir / CORRECTED, lambda f: f.write(dumps_compact(corrected)))
+    if deployable is not None:
+        if same_elites(deployable, archives["true"]):
+            # a run that ranks by the true return keeps the same elites in both archives, in
+            # the same order: their scores would be the same episodes, so they are played once
+            summary["deployable"] = {**found, "learned_metrics": found["training_metrics"]}
+            summary["deployable"]["same_as_true"] = True
+            deployable_bytes = corrected_bytes
+        else:
+            loaded = (deployable, iteration)
+            deployable, summary["deployable"] = rescore(run_dir, "deployable", *settings, loaded)
+            deployable_bytes = dumps_compact(deployable)
+        atomic_write(run_dir / CORRECTED_DEPLOYABLE, lambda f: f.write(deployable_bytes))
+    atomic_write(run_dir / CORRECTED, lambda f: f.write(corrected_bytes))
     atomic_write(run_dir / EVAL_JSON, lambda f: f.write(json.dumps(summary, indent=1).encode()))
     return corrected, summary
