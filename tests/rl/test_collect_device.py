@@ -94,3 +94,47 @@ def test_the_torch_face_needs_a_device_backend() -> None:
     env = LocomotionVectorEnv("Walker2d-v5", 2, autoreset_mode="SameStep")
     with pytest.raises(ValueError, match=r"env\.backend: warp"):
         TorchVectorEnv(env)
+
+
+@pytest.mark.parametrize("task", ["Walker2d-v5", "Humanoid-v5-newton"])
+def test_autoresets_without_the_solver_change_no_bit(task: str, monkeypatch) -> None:
+    """An autoreset runs ``forward`` only up to the actuator forces, and nothing changes.
+
+    Against a run whose resets call MuJoCo Warp's whole ``forward``: the same rollouts
+    and the same physics state after them, bit for bit, across many autoresets
+    (Humanoid's observation reads cinert, cvel and actuator forces; Walker2d's contacts).
+    """
+    from qdil.envs.warp_physics import WarpBatch
+
+    def collect() -> tuple[list, dict[str, np.ndarray]]:
+        env = LocomotionVectorEnv(
+            task, 4, max_episode_steps=3, autoreset_mode="SameStep", backend="warp", device="cpu"
+        )
+        obs_dim, action_dim = (
+            env.single_observation_space.shape[0],
+            env.single_action_space.shape[0],
+        )
+        actor = VectorizedActor(2, obs_dim, action_dim)
+        actor.set_solutions(
+            np.stack([actor.initial_solution(obs_dim, action_dim, seed=s) for s in range(2)]) * 30
+        )
+        collector = DeviceCollector(env, reset_depth=2)
+        collector.start(seed=3)
+        rollout, _ = collector.collect(
+            actor, RunningMeanStd(2, (obs_dim,)), 8, torch.Generator().manual_seed(1), False
+        )
+        data = env.physics.wdata
+        state = {f: getattr(data, f).numpy().copy() for f in ("qpos", "qvel", "qacc_warmstart")}
+        return [getattr(rollout, k) for k in (*EXACT, "rewards", "starts")], state
+
+    observed_rollout, observed_state = collect()
+    with monkeypatch.context() as patch:
+        patch.setattr(
+            WarpBatch, "_observed_stages", lambda self: self.mjw.forward(self.wmodel, self.wdata)
+        )
+        forward_rollout, forward_state = collect()
+    assert float(observed_rollout[EXACT.index("dones")].sum()) >= 8  # resets happened
+    for a, b in zip(observed_rollout, forward_rollout, strict=True):
+        torch.testing.assert_close(a, b, rtol=0, atol=0)
+    for field, value in forward_state.items():
+        np.testing.assert_array_equal(observed_state[field], value, err_msg=field)
