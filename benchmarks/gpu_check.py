@@ -7,13 +7,19 @@ H100 or H200)::
 
 measures, in steady state (kernels compiled and Warp graphs recorded before any clock runs):
 
+0. where one training env step's time goes at the paper's N = 3,000: each recorded Warp
+   sequence (substeps, sensor pass, reset, the reset's observed stages of ``forward``, and
+   the whole ``forward`` for comparison), the torch face's step and a collector step, with
+   the Warp launches and torch operators behind them and the solver's iterations;
 1. rollout-face env-steps/s (:class:`qdil.envs.torch_vector.TorchVectorEnv`, no host copy,
    autoreset on) at N = 1,024, 4,096 and 16,384 simulations of Walker2d-v5;
 2. host syncs per env step in a training rollout of the paper's size (the GPU recipe's
    3,000 simulations, 128 steps), counted by torch's sync debug mode;
 3. two QD iterations of ``recipes/gpu/walker_mcwae.yaml`` through ``qdil fit``, with each
    phase's seconds from ``metrics.csv`` (the second iteration is the figure: the first
-   records graphs and builds the reward model's optimiser state);
+   records graphs and builds the reward model's optimiser state), then the same with θ_μ
+   and its branches scored one after the other (``--env.eval_envs 3000``) as the baseline
+   of scoring them side by side;
 4. the GPU tests (``pytest -m gpu -n 0 tests/test_gpu.py tests/envs/test_warp_backend.py``).
 
 It writes ``gpu_check.json`` (after every step, so a check cut short keeps what it
@@ -44,7 +50,7 @@ from typing import Any
 ROOT = Path(__file__).resolve().parents[1]
 RECIPE = ROOT / "recipes" / "gpu" / "walker_mcwae.yaml"
 GPU_TESTS = ["tests/test_gpu.py", "tests/envs/test_warp_backend.py"]
-PHASES = ("jacobian", "walk", "evaluate", "mean_evaluate", "reward_update")
+PHASES = ("jacobian", "walk", "evaluate", "reward_update")
 # the same recipe, scaled down for Warp's CPU device (--quick): every phase still runs
 QUICK = [
     "--env.num_envs", "6", "--env.max_episode_steps", "40",
@@ -115,6 +121,128 @@ def rollout_throughput(device: str, sizes: list[int], steps: int) -> dict[str, f
         sync()
         result[str(n)] = steps * n / (time.perf_counter() - start)
         del face, env
+    return result
+
+
+class LaunchCount:
+    """Counts Warp kernel launches (``warp.launch``/``launch_tiled``) made from Python."""
+
+    def __enter__(self) -> LaunchCount:
+        import warp
+
+        self.count, self._warp = 0, warp
+        self._saved = {name: getattr(warp, name) for name in ("launch", "launch_tiled")}
+        for name, launch in self._saved.items():
+            setattr(warp, name, self._counted(launch))
+        return self
+
+    def _counted(self, launch: Callable) -> Callable:
+        def counted(*args: Any, **kwargs: Any) -> Any:
+            self.count += 1
+            return launch(*args, **kwargs)
+
+        return counted
+
+    def __exit__(self, *exc: object) -> None:
+        for name, launch in self._saved.items():
+            setattr(self._warp, name, launch)
+
+
+def torch_ops(call: Callable[[], Any]) -> int:
+    """Torch operators ``call`` dispatches (on a GPU, about one kernel launch each)."""
+    from torch.utils._python_dispatch import TorchDispatchMode
+
+    class Count(TorchDispatchMode):
+        count = 0
+
+        def __torch_dispatch__(self, func, types, args=(), kwargs=None):
+            Count.count += 1
+            return func(*args, **(kwargs or {}))
+
+    with Count():
+        call()
+    return Count.count
+
+
+def step_breakdown(device: str, n: int, repeats: int) -> dict[str, Any]:
+    """Where a training env step's time goes at N simulations, and what it launches.
+
+    Each Warp sequence of the torch face's step (the frame skip's substeps, the sensor
+    pass, the autoreset's reset and its observed stages of ``forward``; MuJoCo Warp's whole
+    ``forward``, which autoresets ran before, for comparison) is replayed ``repeats``
+    times from its graph and timed; the whole face step and a collector step too. Warp
+    launches are counted with each sequence launched once from Python, torch operators
+    per collector step as the difference of a 2-step and a 1-step rollout.
+    """
+    import torch
+
+    from qdil.envs.torch_vector import TorchVectorEnv
+    from qdil.envs.vector import LocomotionVectorEnv
+    from qdil.rl.collect_device import DeviceCollector
+    from qdil.rl.networks import VectorizedActor
+    from qdil.rl.normalize import RunningMeanStd
+
+    sync = _sync(device)
+    env = LocomotionVectorEnv(
+        "Walker2d-v5", n, autoreset_mode="SameStep", backend="warp", device=device
+    )
+    face = TorchVectorEnv(env)
+    face.reset(seed=0)
+    physics, task = env.physics, env.task
+    generator = torch.Generator(device=face.device).manual_seed(0)
+    dim = env.single_action_space.shape[0]
+    actions = torch.rand((n, dim), generator=generator, device=face.device) * 2 - 1
+    for _ in range(face.reset_depth + 2):  # compile and record every graph
+        face.step(actions)
+    mjw, m, d = physics.mjw, physics.wmodel, physics.wdata
+    sequences: dict[str, tuple[tuple, Callable[[], None]]] = {
+        "substeps": (("step", task.frame_skip), lambda: physics._substeps(task.frame_skip)),
+        "sensors": (("sensors",), physics._sensor_pass),
+        "reset": (("reset",), lambda: mjw.reset_data(m, d, reset=physics._reset_mask)),
+        "observed": (("observed",), physics._observed_stages),
+        "forward": (("forward",), lambda: mjw.forward(m, d)),
+    }
+    result: dict[str, Any] = {"num_envs": n, "repeats": repeats, "ms": {}, "warp_launches": {}}
+    with physics._on_torch_stream():
+        for name, (key, launches) in sequences.items():
+            physics._launch(key, launches)  # records the graph if not yet recorded
+            with LaunchCount() as counter:
+                launches()
+            result["warp_launches"][name] = counter.count
+            sync()
+            start = time.perf_counter()
+            for _ in range(repeats):
+                physics._launch(key, launches)
+            sync()
+            result["ms"][name] = 1e3 * (time.perf_counter() - start) / repeats
+    niter = torch.as_tensor(d.solver_niter.numpy()).double()
+    result["solver_iterations"] = {"mean": float(niter.mean()), "max": float(niter.max())}
+    sync()
+    start = time.perf_counter()
+    for _ in range(repeats):
+        face.step(actions)
+    sync()
+    result["ms"]["face_step"] = 1e3 * (time.perf_counter() - start) / repeats
+    result["torch_ops"] = {"face_step": torch_ops(lambda: face.step(actions))}
+
+    collector = DeviceCollector(env, reset_depth=face.reset_depth)
+    obs_dim = env.single_observation_space.shape[0]
+    actor = VectorizedActor(3, obs_dim, dim).to(face.device)
+    stats = RunningMeanStd(3, (obs_dim,), device=face.device)
+    collector.start(seed=1)
+
+    def collect(steps: int) -> Any:
+        return collector.collect(actor, stats, steps, generator, update_stats=False)
+
+    collect(face.reset_depth + 2)
+    per_rollout = [torch_ops(lambda t=t: collect(t)) for t in (1, 2)]
+    result["torch_ops"]["collect_step"] = per_rollout[1] - per_rollout[0]
+    steps = max(repeats, 2)
+    sync()
+    start = time.perf_counter()
+    collect(steps)
+    sync()
+    result["ms"]["collect_step"] = 1e3 * (time.perf_counter() - start) / steps
     return result
 
 
@@ -231,10 +359,29 @@ def markdown(result: dict[str, Any]) -> str:
             f"| N = {s['num_envs']:,} | {s['steps']} | {count} | {sps:,.0f} |",
             "",
         ]
-    if "iterations" in result:
+    if "breakdown" in result:
+        b = result["breakdown"]
+        lines += [
+            f"| one training step at N = {b['num_envs']:,} | ms | Warp launches | torch ops |",
+            "|---|---|---|---|",
+        ]
+        for name, ms in b["ms"].items():
+            launches = b["warp_launches"].get(name, "")
+            ops = b["torch_ops"].get(name, "")
+            lines.append(f"| {name} | {ms:.2f} | {launches} | {ops} |")
+        it = b["solver_iterations"]
+        lines += [
+            "",
+            f"Solver iterations per world: mean {it['mean']:.1f}, max {it['max']:.0f}.",
+            "",
+        ]
+    for key, title in (("iterations", "side by side"), ("iterations_in_turns", "in turns")):
+        if key not in result:
+            continue
         head = ["iteration", "seconds", *PHASES, "env-steps/s"]
+        lines += [f"Evaluations {title}:", ""]
         lines += ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-        for row in result["iterations"]:
+        for row in result[key]:
             cells = [str(row["iteration"]), f"{row['iter_seconds']:.1f}"]
             cells += [f"{row.get(f'{p}_seconds', float('nan')):.1f}" for p in PHASES]
             cells.append(f"{row.get('sps', float('nan')):,.0f}")
@@ -269,13 +416,21 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     args.out.mkdir(parents=True, exist_ok=True)
     overrides = (QUICK if args.quick else []) + shlex.split(args.set)
     sizes = [6, 24] if args.quick else [1024, 4096, 16384]
+    turns = 3 if args.quick else 3000  # the larger of the two groups: room for one at a time
     command = "python benchmarks/gpu_check.py " + " ".join(argv or sys.argv[1:])
     result: dict[str, Any] = {"command": command.strip(), "device": args.device, "errors": {}}
     steps: dict[str, Callable[[], Any]] = {
         "machine": lambda: machine(args.device),
+        "breakdown": lambda: step_breakdown(
+            args.device, 6 if args.quick else 3000, 3 if args.quick else 50
+        ),
         "throughput": lambda: rollout_throughput(args.device, sizes, 10 if args.quick else 100),
         "syncs": lambda: rollout_syncs(args.device, overrides, 8 if args.quick else None),
         "iterations": lambda: qd_iterations(args.device, overrides, 2),
+        # the same iterations with θ_μ and its branches scored one after the other
+        "iterations_in_turns": lambda: qd_iterations(
+            args.device, [*overrides, "--env.eval_envs", str(turns)], 2
+        ),
         "tests": lambda: gpu_tests(args.budget - (time.perf_counter() - start)),
     }
     for name, step in steps.items():

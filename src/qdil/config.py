@@ -38,7 +38,8 @@ class EnvConfig:
         task: gymnasium task id: Walker2d-v5, HalfCheetah-v5, Humanoid-v5, Hopper-v5, Ant-v5.
         num_envs: simulations of the VPPO phases (the paper: 3000); divisible by k+1.
         eval_envs: simulations of the evaluations; ``null`` for λ·branch_episodes (or
-            mean_episodes if larger).
+            mean_episodes if larger), and on a device backend their sum, which scores the
+            search policy and its branches side by side (below the sum: one after the other).
         num_threads: physics threads; ``null`` for every available core.
         backend: physics engine: ``mujoco`` (MuJoCo's C engine on the CPU, bit-identical to
             gymnasium) or ``warp`` (MuJoCo Warp, float32; ``pip install -e ".[warp]"``).

@@ -147,7 +147,12 @@ def build_run(
     )
 
     # ---- evaluation environment and VPPO
-    eval_size = env.eval_envs or max(emitter.batch_size * qd.branch_episodes, qd.mean_episodes)
+    branch_slots = emitter.batch_size * qd.branch_episodes
+    # a device scores θ_μ and the branches side by side (fewer steps in sequence); the
+    # C engine plays them one after the other, so its environment fits the larger one
+    on_device = env.backend != "mujoco"
+    together, larger = branch_slots + qd.mean_episodes, max(branch_slots, qd.mean_episodes)
+    eval_size = env.eval_envs or (together if on_device else larger)
     eval_env = LocomotionVectorEnv(
         env.task,
         eval_size,

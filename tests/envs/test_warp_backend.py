@@ -137,6 +137,28 @@ def test_fit_runs_on_the_warp_backend(tmp_path: Path, monkeypatch) -> None:
     assert "backend: warp" in (run_dir / "config.yaml").read_text()
 
 
+def test_search_policy_and_branches_scored_side_by_side_change_no_bit(
+    tmp_path, monkeypatch
+) -> None:
+    """A Warp run scores θ_μ and its branches in one batch; one after the other is the same.
+
+    ``env.eval_envs`` below their sum makes the device executor play them in turn; the
+    smoke recipe samples its evaluation actions (each group's own noise).
+    """
+    monkeypatch.chdir(tmp_path)
+    archives = []
+    for name, extra in (("batch", []), ("turns", ["--env.eval_envs", "4"])):
+        main(["fit", str(SMOKE), "--env.backend", "warp", "--env.device", "cpu",
+              "--qd.iterations", "2", "--name", name, *extra])  # fmt: skip
+        with open(tmp_path / "runs" / name / "metrics.csv", newline="") as file:
+            rows = [
+                {k: v for k, v in row.items() if not k.startswith("perf/")}
+                for row in csv.DictReader(file)
+            ]
+        archives.append(rows)
+    assert archives[0] == archives[1]
+
+
 def test_a_gpu_device_without_cuda_is_refused_naming_the_setting(tmp_path, monkeypatch) -> None:
     import warp
 

@@ -144,3 +144,42 @@ def test_cma_es_is_selectable(archive) -> None:
     emitter = make_emitter(archive, es="cma_es")
     tell_round(emitter, archive, status=np.r_[np.ones(3), np.zeros(5)])
     assert emitter.coefficient_mean.shape == (3,)
+
+
+def test_proposed_branches_are_what_ask_returns_and_change_nothing_else() -> None:
+    """Proposing before ``tell_dqd`` (to score θ_μ and branches in one batch) is invisible.
+
+    Two schedulers from the same seeds, one asked the plain way and one proposing first,
+    give the same branches and end in the same archive and strategy over several rounds.
+    """
+    rng = np.random.default_rng(0)
+    plan = [(rng.normal(size=(1, 3, DIM)), rng.uniform(0, 10, 8), rng.uniform(0, 1, (8, 2)))]
+    plan *= 3
+    results = []
+    for propose in (False, True):
+        grid = make_grid(
+            solution_dim=DIM,
+            cells=[5, 5],
+            extra_fields=elite_fields(OBS),
+            learning_rate=0.5,
+            threshold_min=0.0,
+            seed=0,
+        )
+        emitter = make_emitter(grid)
+        scheduler = Scheduler(grid, [emitter], add_mode="batch")
+        asked = []
+        for jacobian, objective, measures in plan:
+            scheduler.ask_dqd()
+            proposed = emitter.propose(jacobian) if propose else None
+            scheduler.tell_dqd(np.array([5.0]), np.array([[0.5, 0.5]]), jacobian, **fields(1))
+            branches = scheduler.ask()
+            if proposed is not None:
+                np.testing.assert_array_equal(branches, proposed)
+            asked.append(branches)
+            scheduler.tell(objective, measures, **fields(len(branches)))
+        results.append((asked, grid.data("objective"), emitter.coefficient_mean))
+    (plain, plain_objective, plain_mean), (batched, batched_objective, batched_mean) = results
+    for a, b in zip(plain, batched, strict=True):
+        np.testing.assert_array_equal(a, b)
+    np.testing.assert_array_equal(np.sort(plain_objective), np.sort(batched_objective))
+    np.testing.assert_array_equal(plain_mean, batched_mean)

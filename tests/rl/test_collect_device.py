@@ -138,3 +138,39 @@ def test_autoresets_without_the_solver_change_no_bit(task: str, monkeypatch) -> 
         torch.testing.assert_close(a, b, rtol=0, atol=0)
     for field, value in forward_state.items():
         np.testing.assert_array_equal(observed_state[field], value, err_msg=field)
+
+
+def test_groups_played_side_by_side_equal_their_own_evaluations() -> None:
+    """θ_μ's and the branches' episodes in one batch: each group's result, bit for bit.
+
+    Stochastic actions (each group's own generator), a learned-reward objective, and
+    groups of different sizes, statistics and episode counts.
+    """
+    from qdil.rl.collect_device import evaluate_groups_on_device
+    from qdil.rl.episodes import EvaluationGroup
+
+    def reward_fn(rollout):
+        return rollout.next_obs[..., 0] - rollout.actions.square().sum(-1)
+
+    actor_a, stats_a = _policies(1)
+    actor_b, stats_b = _policies(3)
+    stats_b.update(torch.randn(3, 20, 17, generator=torch.Generator().manual_seed(2)).double())
+    specs = [(actor_a, stats_a, 4, 11), (actor_b, stats_b, 2, 40)]
+
+    def groups() -> list[EvaluationGroup]:
+        return [
+            EvaluationGroup(a, s, e, seed, torch.Generator().manual_seed(seed))
+            for a, s, e, seed in specs
+        ]
+
+    env = TorchVectorEnv(_env("Disabled", 12))
+    batched = evaluate_groups_on_device(env, groups(), reward_fn, sync_every=4)
+    alone = [
+        evaluate_on_device(env, g.actor, g.stats, g.episodes, g.seed, reward_fn,
+                           generator=g.generator, sync_every=4)
+        for g in groups()
+    ]  # fmt: skip
+    for a, b in zip(batched, alone, strict=True):
+        assert a.env_steps == b.env_steps
+        for field in ("objective", "true_objective", "measures", "lengths", "true_std"):
+            np.testing.assert_array_equal(getattr(a, field), getattr(b, field), err_msg=field)

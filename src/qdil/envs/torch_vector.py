@@ -14,8 +14,9 @@ Two things need the host and are kept off the per-step path:
   every ``reset_depth`` steps one host round trip tops the queues up. A sub-environment
   ends at most one episode per step, so a queue never runs dry.
 - **Autoreset** (``SAME_STEP``) resets the finished worlds in place with
-  ``WarpBatch.reset_where``, which also runs the observed stages of ``forward`` on the other worlds (it
-  leaves their states as they are): knowing whether any world finished would cost a sync.
+  ``WarpBatch.reset_where``, which also runs ``forward``'s observed stages on the other
+  worlds (it leaves their states as they are): knowing whether any world finished would
+  cost a sync.
 
 Rollouts through this face equal those through the numpy face from the same seeds:
 observations, foot contacts and episode ends exactly, rewards to float32 rounding of the

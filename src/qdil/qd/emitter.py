@@ -152,6 +152,7 @@ class PPGAEmitter(EmitterBase):
         self._es.reset(self._draw_mean())
         self._batch_size = self._es.batch_size
         self._jacobian: np.ndarray | None = None
+        self._proposed: np.ndarray | None = None
         self.restarts = 0
         self.itrs = 0
         self.last_improved = 0
@@ -205,18 +206,38 @@ class PPGAEmitter(EmitterBase):
         **fields: np.ndarray,
     ) -> None:
         """Store the (1, k+1, D) Jacobian at θ_μ, each row normalised."""
+        self._jacobian = self._normalized(jacobian)
+
+    def _normalized(self, jacobian: np.ndarray) -> np.ndarray:
+        """(k+1, D) rows of a (1, k+1, D) Jacobian, each divided by its norm if asked."""
         jacobian = np.asarray(jacobian, dtype=np.float64).copy()
         expected = (1, self._num_coefficients, self.solution_dim)
         if jacobian.shape != expected:
             raise ValueError(f"jacobian must have shape {expected}, got {jacobian.shape}")
         if self._normalize_grad:
             jacobian /= np.linalg.norm(jacobian, axis=2, keepdims=True) + self._epsilon
-        self._jacobian = jacobian[0]
+        return jacobian[0]
+
+    def propose(self, jacobian: np.ndarray) -> np.ndarray:
+        """(λ, D) the branches the next ``ask`` returns, drawn now from the (1, k+1, D) Jacobian.
+
+        The branches depend on the Jacobian and the strategy only, not on θ_μ's score, so
+        the QD loop can score θ_μ and its branches in one batch: it proposes, evaluates
+        both, then calls ``tell_dqd`` (with the same Jacobian) and ``ask`` as usual.
+        """
+        self._jacobian = self._normalized(jacobian)
+        self._proposed = self._branch()
+        return self._proposed.copy()
 
     def ask(self) -> np.ndarray:
-        """(λ, D) branches θ_μ + Σ_j c_ij ĝ_j with c_i from the strategy."""
+        """(λ, D) branches θ_μ + Σ_j c_ij ĝ_j with c_i from the strategy (or those proposed)."""
         if self._jacobian is None:
             raise RuntimeError("call ask_dqd() and tell_dqd() before ask()")
+        proposed, self._proposed = getattr(self, "_proposed", None), None
+        return self._branch() if proposed is None else proposed
+
+    def _branch(self) -> np.ndarray:
+        assert self._jacobian is not None
         self.coefficients = self._es.ask()
         return (self._theta + self.coefficients @ self._jacobian).astype(self._theta.dtype)
 

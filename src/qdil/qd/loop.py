@@ -3,10 +3,11 @@
 Each iteration:
 
 1. ``ask_dqd`` gives the search policy θ_μ; VPPO estimates ∇f and ∇m at θ_μ with rewards
-   from the reward model; θ_μ is scored and ``tell_dqd`` inserts it with its Jacobian.
-2. ``ask`` branches λ solutions θ_μ + Σ c_j ĝ_j; each is scored on a few episodes; ``tell``
-   inserts them, ranks the coefficients by archive improvement and adapts xNES (or restarts
-   θ_μ at a random elite when nothing improved).
+   from the reward model; the emitter proposes λ branches θ_μ + Σ c_j ĝ_j.
+2. θ_μ and the branches are scored (side by side where the executor can: the branches do
+   not depend on θ_μ's score); ``tell_dqd`` inserts θ_μ with its Jacobian, ``ask`` returns
+   the proposed branches, ``tell`` inserts them, ranks the coefficients by archive
+   improvement and adapts xNES (or restarts θ_μ at a random elite when nothing improved).
 3. VPPO walks θ_μ along c_0·r̂ + Σ c_j·δ_j with c the xNES mean.
 4. The reward model updates once on expert transitions and this iteration's policy
    transitions (decision D3).
@@ -112,35 +113,33 @@ def qd_iteration(run: Run) -> dict[str, float]:
     timings: dict[str, float] = {}
     tic = time.perf_counter()
 
-    # ---- 1. gradients at θ_μ, and θ_μ itself into the archives
+    # ---- 1. gradients at θ_μ; the branches along them
     theta = scheduler.ask_dqd()[0]
     stats = stats_from_fields(emitter.theta_fields)
     jacobian_phase = vppo.compute_jacobian(theta, stats, train_reward, state.next_seed())
     jacobian = (jacobian_phase.solutions.astype(np.float64) - theta)[None]
     timings["jacobian"] = time.perf_counter() - tic
-    tic_mean = time.perf_counter()
-    mean_eval = vppo.evaluate(
-        theta[None], stats, qd.mean_episodes, state.next_seed(), eval_reward, qd.deterministic_eval
-    )
-    timings["mean_evaluate"] = time.perf_counter() - tic_mean
-    fields = fields_from_stats(stats, mean_eval.lengths)
-    objective = _objective(run, mean_eval)  # the run's own: learned, or true with fitness true
-    scheduler.tell_dqd(objective, mean_eval.measures, jacobian, **fields)
-    run.archives.add(theta[None], objective, mean_eval.true_objective, mean_eval.measures, fields)
-
-    # ---- 2. branch, score, insert, adapt the coefficient distribution
-    branches = scheduler.ask()
+    branches = emitter.propose(jacobian)  # what scheduler.ask() returns below
     branch_stats = RunningMeanStd.stack([stats] * len(branches))
+
+    # ---- 2. score θ_μ and the branches (one batch where the executor can), insert θ_μ,
+    # then the branches; rank the coefficients by archive improvement and adapt xNES
     tic_eval = time.perf_counter()
-    evaluation = vppo.evaluate(
-        branches,
-        branch_stats,
-        qd.branch_episodes,
-        state.next_seed(),
+    mean_eval, evaluation = vppo.evaluate_all(
+        [
+            (theta[None], stats, qd.mean_episodes, state.next_seed()),
+            (branches, branch_stats, qd.branch_episodes, state.next_seed()),
+        ],
         eval_reward,
         qd.deterministic_eval,
     )
     timings["evaluate"] = time.perf_counter() - tic_eval
+    fields = fields_from_stats(stats, mean_eval.lengths)
+    objective = _objective(run, mean_eval)  # the run's own: learned, or true with fitness true
+    scheduler.tell_dqd(objective, mean_eval.measures, jacobian, **fields)
+    run.archives.add(theta[None], objective, mean_eval.true_objective, mean_eval.measures, fields)
+    if not np.array_equal(scheduler.ask(), branches):
+        raise RuntimeError("the scheduler's ask() differs from the emitter's proposal")
     fields = fields_from_stats(branch_stats, evaluation.lengths)
     restarts = emitter.restarts
     objective = _objective(run, evaluation)

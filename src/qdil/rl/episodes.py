@@ -43,6 +43,30 @@ class Evaluation:
     true_std: np.ndarray
 
 
+@dataclass(frozen=True)
+class EvaluationGroup:
+    """P policies to score, each over ``episodes`` episodes (one evaluation of a QD iteration).
+
+    Attributes:
+        actor: the P policies.
+        stats: their observation statistics (frozen).
+        episodes: episodes per policy.
+        seed: reset seed (slot i of the group: ``seed + i``).
+        generator: random source of the group's action noise.
+    """
+
+    actor: VectorizedActor
+    stats: RunningMeanStd
+    episodes: int
+    seed: int
+    generator: torch.Generator
+
+    @property
+    def slots(self) -> int:
+        """Simulations the group plays on: P·episodes."""
+        return self.actor.num_models * self.episodes
+
+
 class EpisodePlayer:
     """Plays one episode on each of the first ``used`` simulations of a ``DISABLED`` env.
 

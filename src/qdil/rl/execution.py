@@ -16,8 +16,8 @@ from qdil.data import Rollout
 from qdil.envs.torch_vector import TorchVectorEnv, has_torch_face
 from qdil.envs.vector import LocomotionVectorEnv
 from qdil.rl.collect import Collector, PolicyData, RewardFn
-from qdil.rl.collect_device import DeviceCollector, evaluate_on_device
-from qdil.rl.episodes import Evaluation, evaluate_policies
+from qdil.rl.collect_device import DeviceCollector, evaluate_groups_on_device, evaluate_on_device
+from qdil.rl.episodes import Evaluation, EvaluationGroup, evaluate_policies
 from qdil.rl.networks import VectorizedActor
 from qdil.rl.normalize import RunningMeanStd
 
@@ -72,6 +72,21 @@ class Executor(abc.ABC):
         generator: torch.Generator,
     ) -> Evaluation:
         """Score P policies over ``episodes`` episodes each (see ``evaluate_policies``)."""
+
+    def evaluate_all(
+        self, groups: list[EvaluationGroup], reward_fn: RewardFn | None, deterministic: bool
+    ) -> list[Evaluation]:
+        """Score several groups of policies; each result equals the group's own ``evaluate``.
+
+        This default plays the groups one after the other; an executor that can play them
+        side by side (:class:`DeviceExecutor`) overrides it.
+        """
+        return [
+            self.evaluate(
+                g.actor, g.stats, g.episodes, g.seed, reward_fn, deterministic, g.generator
+            )
+            for g in groups
+        ]
 
     @abc.abstractmethod
     def close(self) -> None:
@@ -171,6 +186,22 @@ class DeviceExecutor(LocalExecutor):
             deterministic,
             self.obs_clip,
             generator,
+        )
+
+    def evaluate_all(
+        self, groups: list[EvaluationGroup], reward_fn: RewardFn | None, deterministic: bool
+    ) -> list[Evaluation]:
+        """Score the groups side by side in one batch where the environment has room.
+
+        One batch takes as many steps in sequence as the longest group's episodes, not
+        their sum; every group's result is the same as from its own ``evaluate``
+        (``evaluate_groups_on_device``). Without room for all of them (``env.eval_envs``
+        set below their sum) the groups are played one after the other.
+        """
+        if sum(g.slots for g in groups) > self.eval_face.num_envs:
+            return super().evaluate_all(groups, reward_fn, deterministic)
+        return evaluate_groups_on_device(
+            self.eval_face, groups, reward_fn, deterministic, self.obs_clip
         )
 
 

@@ -45,7 +45,7 @@ import torch
 from qdil.data import Rollout
 from qdil.envs.vector import LocomotionVectorEnv
 from qdil.rl.collect import ActionMap, PolicyData
-from qdil.rl.episodes import Evaluation
+from qdil.rl.episodes import Evaluation, EvaluationGroup
 from qdil.rl.execution import Executor, LocalExecutor, default_executor
 from qdil.rl.networks import VectorizedActor, VectorizedCritic
 from qdil.rl.normalize import RunningMeanStd
@@ -357,13 +357,37 @@ class VPPO:
         deterministic: bool = False,
     ) -> Evaluation:
         """Score P solutions over ``episodes`` episodes each (see ``evaluate_policies``)."""
-        actor = VectorizedActor(len(solutions), self.obs_dim, self.action_dim, self.actor_hidden)
-        actor = actor.to(self.device)
-        actor.set_solutions(solutions)  # exactly the stored policies, log σ included
-        stats = stats.to(self.device)
-        return self.executor.evaluate(
-            actor, stats, episodes, seed, reward_fn, deterministic, self.generator
-        )
+        return self.evaluate_all([(solutions, stats, episodes, seed)], reward_fn, deterministic)[0]
+
+    def evaluate_all(
+        self,
+        requests: list[tuple[np.ndarray, RunningMeanStd, int, int]],
+        reward_fn: RewardFn | None = None,
+        deterministic: bool = False,
+    ) -> list[Evaluation]:
+        """Score several groups of solutions, each over its own episodes and reset seed.
+
+        The executor may play the groups side by side (on a device it does); each group's
+        action noise comes from a generator seeded with its own reset seed, so its result
+        is the same either way, and evaluations leave the training noise untouched.
+
+        Args:
+            requests: ``(solutions (P, D), stats, episodes, seed)`` of each group.
+            reward_fn: scores the episodes for the objective; ``None``: the true return.
+            deterministic: act with the mean action or sample.
+
+        Returns:
+            One evaluation per group, in order.
+        """
+        groups = []
+        for solutions, stats, episodes, seed in requests:
+            actor = VectorizedActor(
+                len(solutions), self.obs_dim, self.action_dim, self.actor_hidden
+            ).to(self.device)
+            actor.set_solutions(solutions)  # exactly the stored policies, log σ included
+            generator = torch.Generator(device=self.device).manual_seed(seed)
+            groups.append(EvaluationGroup(actor, stats.to(self.device), episodes, seed, generator))
+        return self.executor.evaluate_all(groups, reward_fn, deterministic)
 
     def log_probs(
         self, solution: np.ndarray, stats: RunningMeanStd, obs: torch.Tensor, actions: torch.Tensor
