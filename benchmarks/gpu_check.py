@@ -10,7 +10,8 @@ measures, in steady state (kernels compiled and Warp graphs recorded before any 
 0. where one training env step's time goes at the paper's N = 3,000: each recorded Warp
    sequence (substeps, sensor pass, reset, the reset's observed stages of ``forward``, and
    the whole ``forward`` for comparison), the torch face's step and a collector step, with
-   the Warp launches and torch operators behind them and the solver's iterations;
+   the Warp launches and torch operators behind them and the solver's iterations; and one
+   frame skip replayed at N = 1, 256, 3,000 and 16,384 (its latency floor);
 1. rollout-face env-steps/s (:class:`qdil.envs.torch_vector.TorchVectorEnv`, no host copy,
    autoreset on) at N = 1,024, 4,096 and 16,384 simulations of Walker2d-v5;
 2. host syncs per env step in a training rollout of the paper's size (the GPU recipe's
@@ -246,6 +247,43 @@ def step_breakdown(device: str, n: int, repeats: int) -> dict[str, Any]:
     return result
 
 
+def frame_skip_floor(device: str, sizes: list[int], repeats: int) -> dict[str, float]:
+    """ms of one frame skip of Walker2d replayed from its Warp graph, zero actions, per N.
+
+    With a single simulation this is the cost of the kernels themselves (launch latency),
+    which no batch size lowers.
+    """
+    import torch
+
+    from qdil.envs.torch_vector import TorchVectorEnv
+    from qdil.envs.vector import LocomotionVectorEnv
+
+    sync, result = _sync(device), {}
+    for n in sizes:
+        env = LocomotionVectorEnv(
+            "Walker2d-v5", n, autoreset_mode="SameStep", backend="warp", device=device
+        )
+        face = TorchVectorEnv(env)
+        face.reset(seed=0)
+        zeros = torch.zeros((n, env.single_action_space.shape[0]), device=face.device)
+        for _ in range(face.reset_depth + 2):
+            face.step(zeros)
+        physics = env.physics
+        graph = physics._graphs.get(("step", env.task.frame_skip))
+        with physics._on_torch_stream():
+            sync()
+            start = time.perf_counter()
+            for _ in range(repeats):
+                if graph is None:
+                    physics._substeps(env.task.frame_skip)
+                else:
+                    physics.warp.capture_launch(graph)
+            sync()
+        result[str(n)] = 1e3 * (time.perf_counter() - start) / repeats
+        del face, env
+    return result
+
+
 def rollout_syncs(device: str, overrides: list[str], steps: int | None) -> dict[str, Any]:
     """Host syncs in one training rollout of the recipe's size (CUDA only: torch counts them)."""
     import torch
@@ -370,6 +408,11 @@ def markdown(result: dict[str, Any]) -> str:
             ops = b["torch_ops"].get(name, "")
             lines.append(f"| {name} | {ms:.2f} | {launches} | {ops} |")
         it = b["solver_iterations"]
+        if "floor" in result:
+            floor = ", ".join(
+                f"{float(ms):.2f} ms at N = {int(n):,}" for n, ms in result["floor"].items()
+            )
+            lines += ["", f"One frame skip replayed at zero actions: {floor}."]
         lines += [
             "",
             f"Solver iterations per world: mean {it['mean']:.1f}, max {it['max']:.0f}.",
@@ -423,6 +466,9 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         "machine": lambda: machine(args.device),
         "breakdown": lambda: step_breakdown(
             args.device, 6 if args.quick else 3000, 3 if args.quick else 50
+        ),
+        "floor": lambda: frame_skip_floor(
+            args.device, [1, 6] if args.quick else [1, 256, 3000, 16384], 3 if args.quick else 100
         ),
         "throughput": lambda: rollout_throughput(args.device, sizes, 10 if args.quick else 100),
         "syncs": lambda: rollout_syncs(args.device, overrides, 8 if args.quick else None),

@@ -22,11 +22,18 @@ def _gpu_check():
 
 def test_the_check_runs_every_step_on_the_cpu(tmp_path: Path, monkeypatch) -> None:
     monkeypatch.chdir(tmp_path)
-    result = _gpu_check().main(["--device", "cpu", "--quick", "--out", str(tmp_path / "out")])
+    # the iterations in turns are a second fit (the batch's equality is tested elsewhere)
+    args = ["--device", "cpu", "--quick", "--out", str(tmp_path / "out")]
+    result = _gpu_check().main([*args, "--skip", "iterations_in_turns", "--budget", "3600"])
     assert result["errors"] == {}
     saved = json.loads((tmp_path / "out" / "gpu_check.json").read_text())
     assert saved["machine"]["card"] == "Warp CPU device"
     assert set(saved["throughput"]) == {"6", "24"}
+    assert set(saved["floor"]) == {"1", "6"} and all(ms > 0 for ms in saved["floor"].values())
+    breakdown = saved["breakdown"]
+    # the autoreset's observed stages launch fewer kernels than the whole forward
+    assert 0 < breakdown["warp_launches"]["observed"] < breakdown["warp_launches"]["forward"]
+    assert breakdown["torch_ops"]["collect_step"] > 0 and breakdown["ms"]["face_step"] > 0
     assert all(sps > 0 for sps in saved["throughput"].values())
     # torch counts host syncs on CUDA alone; the rollout still runs and is timed
     assert saved["syncs"]["syncs"] is None and saved["syncs"]["num_envs"] == 6
@@ -43,7 +50,8 @@ def test_the_check_runs_every_step_on_the_cpu(tmp_path: Path, monkeypatch) -> No
 def test_a_failed_step_is_reported_and_the_others_still_run(tmp_path: Path) -> None:
     result = _gpu_check().main(
         [
-            *("--device", "cpu", "--quick", "--out", str(tmp_path), "--skip", "throughput,tests"),
+            *("--device", "cpu", "--quick", "--out", str(tmp_path)),
+            *("--skip", "breakdown,floor,throughput,iterations_in_turns,tests"),
             "--set=--env.num_envs 5",  # not divisible by Walker2d's k + 1 = 3
         ]
     )
