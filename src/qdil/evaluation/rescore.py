@@ -265,8 +265,16 @@ def rescore_archive(
         if same_elites(deployable, archives["true"]):
             # a run that ranks by the true return keeps the same elites in both archives, in
             # the same order: their scores would be the same episodes, so they are played once
-            summary["deployable"] = {**found, "learned_metrics": found["training_metrics"]}
-            summary["deployable"]["same_as_true"] = True
+            # (the archive-side metrics are the deployable archive's own, computed as its
+            # played summary would compute them: sums in another storage order differ in
+            # the last bit)
+            offset = QD_OFFSETS.get(task, 0.0)
+            summary["deployable"] = {
+                **found,
+                "training_metrics": qd_metrics(true_keyed(deployable), offset),
+                "learned_metrics": qd_metrics(deployable, offset),
+                "same_as_true": True,
+            }
             deployable_bytes = corrected_bytes
         else:
             loaded = (deployable, iteration)
