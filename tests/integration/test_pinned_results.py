@@ -58,18 +58,15 @@ PINS: dict[str, dict[str, str]] = {
     # recorded with MKL's reproducibility mode (issue 29), from code pinned bit-identical
     # since 3af8089 on the AMD EPYC machine, after Evaluation gained ``true_std`` and runs
     # the deployable archive (both checked to leave every other byte as it was); the AMD
-    # pins of that time were recorded without the mode and are to be recorded again there.
-    # fit_true and fit_wqdil recorded again when each evaluation drew its action noise from
-    # its own seed (the smoke recipes sample evaluation actions); with mean actions the same
-    # two-iteration fit kept every byte of e168ef1 (digest aa395a92... before and after)
+    # pins of that time were recorded without the mode and are to be recorded again there
     "x86_64/Intel(R) Xeon(R) Processor @ 2.50GHz/AVX512/MKL AVX512_E1,STRICT/"
     "torch 2.13.0+cpu/numpy 2.4.6/mujoco 4.0.0": {
         "training_rollouts": "6be6d1f636f2592b3a96eec938fe8b220764d0138e5413640fb3564bcc4bf8c0",
         "evaluation_False": "4637d7b98c0c1f23d2025af2e1701e97fd648aeb9f38745e899d70febd3940cd",
         "evaluation_True": "f343c4f33b6ba9668db6bf334d59cf46346d47594120a8fe5316f27ba1b87d95",
         "vppo_phases": "37206bba1eb55a1ef364ce213611e98f5a570d33f715a1da7ab8a74261d0d8b6",
-        "fit_true": "f7b6163876b9f69de1efddf87c0d7196af6f739da696f991939da24ea127c922",
-        "fit_wqdil": "6970ccabaa79219f7e2e06a022ae8ffb581f30da5274504b00e563a9c7b51b77",
+        "fit_true": "59b3707253d644b6679ae095ed0d246c67b84372d7b2be25d56c6d7f8cad4a24",
+        "fit_wqdil": "9d334151c17504712f59344120fb18442e9b42fcc579ff61d5e5b9d554d1bcdb",
     },
 }
 

@@ -74,17 +74,19 @@ class Executor(abc.ABC):
         """Score P policies over ``episodes`` episodes each (see ``evaluate_policies``)."""
 
     def evaluate_all(
-        self, groups: list[EvaluationGroup], reward_fn: RewardFn | None, deterministic: bool
+        self,
+        groups: list[EvaluationGroup],
+        reward_fn: RewardFn | None,
+        deterministic: bool,
+        generator: torch.Generator,
     ) -> list[Evaluation]:
-        """Score several groups of policies; each result equals the group's own ``evaluate``.
+        """Score several groups of policies, one after the other, noise from ``generator``.
 
-        This default plays the groups one after the other; an executor that can play them
-        side by side (:class:`DeviceExecutor`) overrides it.
+        An executor that plays them side by side (:class:`DeviceExecutor`) overrides it and
+        draws each group's noise from the group's own generator instead.
         """
         return [
-            self.evaluate(
-                g.actor, g.stats, g.episodes, g.seed, reward_fn, deterministic, g.generator
-            )
+            self.evaluate(g.actor, g.stats, g.episodes, g.seed, reward_fn, deterministic, generator)
             for g in groups
         ]
 
@@ -189,17 +191,27 @@ class DeviceExecutor(LocalExecutor):
         )
 
     def evaluate_all(
-        self, groups: list[EvaluationGroup], reward_fn: RewardFn | None, deterministic: bool
+        self,
+        groups: list[EvaluationGroup],
+        reward_fn: RewardFn | None,
+        deterministic: bool,
+        generator: torch.Generator,
     ) -> list[Evaluation]:
         """Score the groups side by side in one batch where the environment has room.
 
         One batch takes as many steps in sequence as the longest group's episodes, not
-        their sum; every group's result is the same as from its own ``evaluate``
-        (``evaluate_groups_on_device``). Without room for all of them (``env.eval_envs``
-        set below their sum) the groups are played one after the other.
+        their sum. Each group draws its noise from its own generator (``generator`` is left
+        alone), so its result is the same as from its own ``evaluate``
+        (``evaluate_groups_on_device``); without room for all of them (``env.eval_envs``
+        below their sum) the groups are played one after the other, with the same noise.
         """
         if sum(g.slots for g in groups) > self.eval_face.num_envs:
-            return super().evaluate_all(groups, reward_fn, deterministic)
+            return [
+                evaluate_groups_on_device(
+                    self.eval_face, [g], reward_fn, deterministic, self.obs_clip
+                )[0]
+                for g in groups
+            ]
         return evaluate_groups_on_device(
             self.eval_face, groups, reward_fn, deterministic, self.obs_clip
         )

@@ -367,9 +367,10 @@ class VPPO:
     ) -> list[Evaluation]:
         """Score several groups of solutions, each over its own episodes and reset seed.
 
-        The executor may play the groups side by side (on a device it does); each group's
-        action noise comes from a generator seeded with its own reset seed, so its result
-        is the same either way, and evaluations leave the training noise untouched.
+        The executor may play the groups side by side (on a device it does): there each
+        group's action noise comes from a generator seeded with its own reset seed, so its
+        result is the same side by side or in turns. An executor that plays them in turns on
+        the C engine draws the noise from the training generator, as before.
 
         Args:
             requests: ``(solutions (P, D), stats, episodes, seed)`` of each group.
@@ -387,7 +388,7 @@ class VPPO:
             actor.set_solutions(solutions)  # exactly the stored policies, log σ included
             generator = torch.Generator(device=self.device).manual_seed(seed)
             groups.append(EvaluationGroup(actor, stats.to(self.device), episodes, seed, generator))
-        return self.executor.evaluate_all(groups, reward_fn, deterministic)
+        return self.executor.evaluate_all(groups, reward_fn, deterministic, self.generator)
 
     def log_probs(
         self, solution: np.ndarray, stats: RunningMeanStd, obs: torch.Tensor, actions: torch.Tensor
