@@ -23,6 +23,7 @@ import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
 from qdil.demos.generate import farthest_point_sampling
+from qdil.envs.rendering import CAMERA_DISTANCE
 from qdil.envs.vector import LocomotionVectorEnv
 from qdil.evaluation.gl import use_gl_backend
 from qdil.evaluation.rescore import ReplaySettings, elite_policies
@@ -30,9 +31,6 @@ from qdil.evaluation.video_files import FORMATS, VideoWriter, video_paths
 from qdil.qd.checkpoint import load_archive
 from qdil.rl.episodes import EpisodePlayer
 from qdil.rl.sampler import PolicySampler
-
-CAMERA_DISTANCE = {"Hopper-v5": 3.0}
-"""Camera distance (m) where gymnasium's default camera is not 4 m away."""
 
 _ON, _OFF = (80, 220, 100), (90, 90, 90)  # foot marker colours: touching, in the air
 
