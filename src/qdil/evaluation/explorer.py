@@ -6,7 +6,7 @@ figure's own axes (:class:`~qdil.evaluation.figures.HeatmapGrid`). A click on a 
 under the table, the run, the cell, its return and measures and, for the cells the report
 rendered (:mod:`qdil.evaluation.gallery`), the elite's video; those cells have a blue
 outline. Below, one gallery row per run holds its videos. The page needs nothing online:
-twenty lines of plain JavaScript, the PNGs and the MP4s beside it.
+thirty lines of plain JavaScript, the PNGs and the MP4s beside it.
 """
 
 from __future__ import annotations
@@ -59,6 +59,11 @@ document.addEventListener('click', e => {
   const cell = e.target.closest('.cell'); if (cell) qdilShow(cell); });
 document.addEventListener('keydown', e => {
   if (e.key === 'Enter' && e.target.matches('.cell')) qdilShow(e.target); });
+// a gallery clip plays while the mouse is over it
+document.addEventListener('mouseover', e => {
+  if (e.target.matches('.gallery video')) e.target.play().catch(() => {}); });
+document.addEventListener('mouseout', e => {
+  if (e.target.matches('.gallery video')) e.target.pause(); });
 """
 
 
@@ -190,8 +195,9 @@ def task_blocks(
 
 
 def _gallery_row(run: RunResult, videos: Sequence[Video], out: Path) -> str:
+    # "#t=1": each clip shows a frame one second in (a stride, not the reset pose)
     figures = "".join(
-        f'<figure><video src="{_attr(v.path.relative_to(out).as_posix())}" controls muted '
+        f'<figure><video src="{_attr(v.path.relative_to(out).as_posix())}#t=1" controls muted '
         f'loop playsinline preload="metadata"></video><figcaption>cell {_cell_text(v.cell)}'
         f" · return {v.episode_return:,.1f}<br>measures ({_measures(v.measures)})"
         "</figcaption></figure>"
