@@ -326,6 +326,7 @@ def made(tmp_path_factory: pytest.TempPathFactory) -> SimpleNamespace:
     stdout = io.StringIO()
     ghost = root / "ghost"
     args = ["report", str(runs), str(root / "lost"), "--out", str(out), "--label", f"{ghost}=G"]
+    args += ["--videos", "0"]  # tests/evaluation/test_report_page.py makes videos
     with contextlib.redirect_stdout(stdout):
         main(args)
     return SimpleNamespace(root=root, runs=runs, out=out, stdout=stdout.getvalue())

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 from qdil.cli.args import at_least, existing_run_dir
@@ -61,7 +62,9 @@ def report(argv: list[str]) -> None:
         prog="qdil report",
         description="Paper-style report of run directories: main table (mean ± std over "
         "seeds), Tukey HSD on the QD-Score, archive heatmaps, learning curves. Runs that are "
-        "missing or unfinished are listed, not dropped.",
+        "missing or unfinished are listed, not dropped. On report.html a click on a heatmap's "
+        "cell shows its elite's return, measures and video; videos need headless OpenGL "
+        "(see qdil render --help) and are left out, saying why, without it.",
     )
     parser.add_argument("paths", nargs="+", metavar="RUN_DIR", help="runs or folders of runs")
     parser.add_argument("--out", required=True, help="output folder of the report")
@@ -83,6 +86,15 @@ def report(argv: list[str]) -> None:
         help="do not keep records of the runs in OUT/runs/ (config, curves, final archive "
         "without policies: enough to make the report again when the runs are gone)",
     )
+    parser.add_argument(
+        "--videos",
+        type=at_least(0),
+        default=6,
+        metavar="K",
+        help="videos of K elites per run, spread over its archive, for report.html "
+        "(default 6; 0: none). Each is one deterministic episode at 320x208, as qdil render "
+        "draws it: seconds to a minute each with software OpenGL",
+    )
     args = parser.parse_args(argv)
     labels = {}
     for item in args.label:
@@ -90,6 +102,7 @@ def report(argv: list[str]) -> None:
         if not sep or not path or not label:
             parser.error(f"--label takes RUN_DIR=LABEL, got {item!r}")
         labels[path] = label
+    from qdil.evaluation.gallery import VideoSettings
     from qdil.evaluation.report import write_report
 
     made = write_report(
@@ -98,6 +111,7 @@ def report(argv: list[str]) -> None:
         labels=labels,
         reference=args.reference,
         records=not args.no_records,
+        videos=VideoSettings(count=args.videos),
     )
     left_out = [run for run in made.runs if not run.included]
     unfinished = [run for run in made.runs if run.included and run.unfinished]
@@ -108,6 +122,13 @@ def report(argv: list[str]) -> None:
     )
     for run in [run for run in made.runs if run.problems or run.notes]:
         print(f"  {run.path}: {run.status}: {'; '.join(run.problems + run.notes)}")
+    gallery = made.gallery
+    if gallery.count:
+        print(f"videos: {gallery.count} in {gallery.seconds:.0f} s -> {Path(args.out) / 'videos'}")
+    elif args.videos and gallery.reason:  # one line; the page says it too
+        print(f"qdil report: no videos: {gallery.reason}", file=sys.stderr)
+    for path, note in gallery.notes.items():
+        print(f"  {path}: {note}", file=sys.stderr)
     print(f"report: {Path(args.out) / 'report.md'} (also report.html, tables, figures)")
     if len(left_out) < len(made.runs):  # at least one run made it into the report
         return

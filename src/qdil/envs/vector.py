@@ -31,6 +31,7 @@ from gymnasium.vector.utils import batch_space
 
 from qdil.envs.backends import make_physics
 from qdil.envs.physics import add_contact_sensors
+from qdil.envs.rendering import CAMERA_DISTANCE, RENDER_MODES, StateRenderer
 from qdil.envs.tasks import LocomotionTask, make_task
 
 
@@ -52,6 +53,8 @@ class LocomotionVectorEnv(VectorEnv):
             ``"warp"`` (MuJoCo Warp, :class:`~qdil.envs.warp_physics.WarpBatch`).
         device: Warp device of the ``warp`` backend, ``"cpu"`` or ``"cuda[:N]"``; the
             ``mujoco`` backend runs on the CPU only.
+        render_mode: ``"rgb_array"``: :meth:`render` draws the first simulation
+            (:mod:`qdil.envs.rendering`); ``None``: no rendering.
         **task_kwargs: gymnasium's keyword arguments of the task, e.g. ``ctrl_cost_weight``.
 
     Attributes:
@@ -59,7 +62,7 @@ class LocomotionVectorEnv(VectorEnv):
             ``factory(num_envs, autoreset_mode=..., num_threads=...)``.
 
     Raises:
-        ValueError: for an unknown task, keyword, autoreset mode or a bad size.
+        ValueError: for an unknown task, keyword, autoreset or render mode, or a bad size.
     """
 
     def __init__(
@@ -71,6 +74,7 @@ class LocomotionVectorEnv(VectorEnv):
         num_threads: int | None = None,
         backend: str = "mujoco",
         device: str = "cpu",
+        render_mode: str | None = None,
         **task_kwargs: Any,
     ) -> None:
         # how to build this task again elsewhere (a remote worker's shard): by name, so that
@@ -97,8 +101,11 @@ class LocomotionVectorEnv(VectorEnv):
         self.task = task
         self.num_envs = int(num_envs)
         self.max_episode_steps = max_episode_steps
-        self.metadata = {"autoreset_mode": self.autoreset_mode, "render_modes": []}
-        self.render_mode = None
+        if render_mode is not None and render_mode not in RENDER_MODES:
+            raise ValueError(f"render_mode {render_mode!r} is not one of {list(RENDER_MODES)}")
+        self.metadata = {"autoreset_mode": self.autoreset_mode, "render_modes": list(RENDER_MODES)}
+        self.render_mode = render_mode
+        self._renderer: StateRenderer | None = None
 
         spec = mujoco.MjSpec.from_file(str(task.xml_path))
         add_contact_sensors(spec, task.feet, task.floor)
@@ -109,6 +116,7 @@ class LocomotionVectorEnv(VectorEnv):
             self.model = spec.compile()
         reference = mujoco.MjData(self.model)
         task.bind(self.model, reference.qpos.ravel().copy(), reference.qvel.ravel().copy())
+        self.metadata["render_fps"] = round(1 / task.dt)  # real time, as gymnasium's envs
         self.backend, self.device = backend, device
         self.physics = make_physics(
             backend,
@@ -350,5 +358,26 @@ class LocomotionVectorEnv(VectorEnv):
         self._obs = obs
         return obs.copy(), reward, terminated, truncated, info
 
+    def render(self) -> tuple[np.ndarray, ...] | None:
+        """The first simulation's state drawn: a one-tuple of a (480, 480, 3) uint8 frame.
+
+        Gymnasium's vector API returns a frame per sub-environment drawn; this draws the
+        first only (a batch is hundreds). Reads the state, writes nothing to the simulation.
+
+        Returns:
+            ``(frame,)``, or ``None`` (with gymnasium's warning) without a render mode.
+        """
+        if self.render_mode is None:
+            gymnasium.logger.warn("render() called without a render_mode; pass render_mode=")
+            return None
+        if self._renderer is None:
+            task = self.task.reference_id or self.task.gym_id
+            self._renderer = StateRenderer(self.model, distance=CAMERA_DISTANCE.get(task, 4.0))
+        qpos, qvel = self.physics.view("qpos")[0], self.physics.view("qvel")[0]
+        return (self._renderer.draw(qpos, qvel),)
+
     def close_extras(self, **kwargs: Any) -> None:
-        """Nothing to release: the simulations are plain MuJoCo data."""
+        """Free the renderer's OpenGL context, if :meth:`render` made one."""
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None

@@ -1,8 +1,9 @@
 """A tiny document model rendered both as Markdown and as a standalone HTML page.
 
-A report is a list of blocks (headings, paragraphs, bullet lists, tables, images). Inline
-text may use three bits of Markdown, which the HTML renderer converts: ``**bold**``,
-```code``` and ``![alt](path)`` images (also inside table cells).
+A report is a list of blocks (headings, paragraphs, bullet lists, tables, images, and raw
+HTML with a Markdown stand-in). Inline text may use four bits of Markdown, which the HTML
+renderer converts: ``**bold**``, ```code```, ``![alt](path)`` images (also inside table
+cells) and ``[text](path)`` links.
 """
 
 from __future__ import annotations
@@ -18,13 +19,15 @@ class Block:
     """One block of a document.
 
     Attributes:
-        kind: ``heading``, ``text``, ``list``, ``table`` or ``image``.
-        text: heading or paragraph text, or an image's alt text.
+        kind: ``heading``, ``text``, ``list``, ``table``, ``image`` or ``html``.
+        text: heading or paragraph text, an image's alt text, or the Markdown of an
+            ``html`` block.
         level: heading level (1 = title).
         items: bullet items of a list.
         header: column names of a table.
         rows: table rows, each as long as ``header``.
         path: relative path of an image.
+        html: the HTML of an ``html`` block.
     """
 
     kind: str
@@ -34,6 +37,7 @@ class Block:
     header: list[str] = field(default_factory=list)
     rows: list[list[str]] = field(default_factory=list)
     path: str = ""
+    html: str = ""
 
 
 def heading(text: str, level: int = 2) -> Block:
@@ -59,6 +63,11 @@ def table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> Block:
 def image(path: str, alt: str) -> Block:
     """An image block (``path`` relative to the document)."""
     return Block("image", text=alt, path=path)
+
+
+def raw(html_text: str, markdown: str = "") -> Block:
+    """HTML for the page (an interactive figure), with ``markdown`` standing for it in Markdown."""
+    return Block("html", text=markdown, html=html_text)
 
 
 def _cell(value: str) -> str:
@@ -87,18 +96,22 @@ def to_markdown(blocks: Sequence[Block]) -> str:
             parts.append(markdown_table(block.header, block.rows))
         elif block.kind == "image":
             parts.append(f"![{block.text}]({block.path})")
+        elif block.kind == "html" and block.text:
+            parts.append(block.text)
     return "\n\n".join(parts) + "\n"
 
 
 _IMAGE = re.compile(r"!\[([^\]]*)\]\(([^)]+)\)")
+_LINK = re.compile(r"(?<![!\w\]])\[([^\]]*)\]\(([^)\s]+)\)")
 _BOLD = re.compile(r"\*\*(.+?)\*\*")
 _CODE = re.compile(r"`([^`]+)`")
 
 
 def inline_html(content: str) -> str:
-    """Escape text and convert ``**bold**``, ```code``` and ``![alt](path)`` to HTML."""
+    """Escape text; convert ``**bold**``, ```code```, ``![alt](path)`` and ``[text](path)``."""
     escaped = html.escape(content, quote=False)
     escaped = _IMAGE.sub(r'<img src="\2" alt="\1">', escaped)
+    escaped = _LINK.sub(r'<a href="\2">\1</a>', escaped)
     escaped = _BOLD.sub(r"<b>\1</b>", escaped)
     return _CODE.sub(r"<code>\1</code>", escaped)
 
@@ -133,6 +146,8 @@ def to_html(blocks: Sequence[Block], title: str) -> str:
             body.append(
                 f'<p><img src="{html.escape(block.path)}" alt="{html.escape(block.text)}"></p>'
             )
+        elif block.kind == "html":
+            body.append(block.html)
     return (
         f'<!DOCTYPE html>\n<html><head><meta charset="utf-8"><title>{html.escape(title)}</title>'
         f"<style>{_STYLE}</style></head><body>\n" + "\n".join(body) + "\n</body></html>\n"

@@ -9,7 +9,9 @@ from __future__ import annotations
 
 import re
 from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from ribs.archives import GridArchive
@@ -32,6 +34,50 @@ CURVE_METRICS: tuple[tuple[str, str, float], ...] = (
 """(metrics.csv column, axis label, scale) of the learning curves."""
 
 
+HEATMAP_DPI = 100
+"""Resolution of the heatmap PNGs (the report page places its clickable cells in pixels)."""
+
+
+@dataclass(frozen=True)
+class HeatmapGrid:
+    """Where a heatmap PNG draws the archive's grid: pixel edges of its cells.
+
+    Attributes:
+        width: PNG width in pixels.
+        height: PNG height in pixels.
+        x_edges: (dims[0] + 1,) pixel columns of the first measure's cell boundaries.
+        y_edges: (dims[1] + 1,) pixel rows of the second measure's cell boundaries (rows
+            count down from the top, so they decrease); a 1-D archive's two rows span the
+            strip it is drawn in.
+    """
+
+    width: int
+    height: int
+    x_edges: np.ndarray
+    y_edges: np.ndarray
+
+    def box(self, cell: Sequence[int]) -> tuple[float, float, float, float]:
+        """``(x, y, w, h)`` of a cell in pixels, ``(x, y)`` its top left corner."""
+        i, j = cell[0], cell[1] if len(cell) > 1 else 0
+        left, right = self.x_edges[i], self.x_edges[i + 1]
+        bottom, top = self.y_edges[j], self.y_edges[j + 1]
+        return float(left), float(top), float(right - left), float(bottom - top)
+
+
+def heatmap_grid(figure: Any, archive: GridArchive) -> HeatmapGrid:
+    """The pixel grid of a heatmap that :func:`~qdil.evaluation.plots.archive_heatmap` drew.
+
+    Call it after ``figure.savefig(..., dpi=HEATMAP_DPI)``, which lays the axes out.
+    """
+    ax = figure.axes[0]  # the heatmap; the colour bar is the second
+    scale = HEATMAP_DPI / figure.dpi
+    width, height = (np.round(figure.get_size_inches() * HEATMAP_DPI)).astype(int)
+    x = ax.transData.transform(np.c_[archive.boundaries[0], np.zeros(archive.dims[0] + 1)])
+    y_bounds = archive.boundaries[1] if archive.measure_dim > 1 else np.array(ax.get_ylim())
+    y = ax.transData.transform(np.c_[np.full(len(y_bounds), archive.lower_bounds[0]), y_bounds])
+    return HeatmapGrid(int(width), int(height), x[:, 0] * scale, height - y[:, 1] * scale)
+
+
 def _slug(text: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", text).strip("_") or "run"
 
@@ -45,8 +91,15 @@ def colour_range(archives: Iterable[GridArchive | None]) -> tuple[float | None, 
     return float(values.min()), float(values.max())
 
 
-def plot_heatmaps(groups: Groups, out: Path) -> dict[Path, str]:
+def plot_heatmaps(
+    groups: Groups, out: Path, grids: dict[Path, HeatmapGrid] | None = None
+) -> dict[Path, str]:
     """Save a heatmap of every run's final archive under ``out/heatmaps``.
+
+    Args:
+        groups: the report's runs.
+        out: the report folder.
+        grids: filled with run directory -> where its PNG draws the grid, if given.
 
     Returns:
         Run directory -> PNG path relative to ``out``.
@@ -70,7 +123,9 @@ def plot_heatmaps(groups: Groups, out: Path) -> dict[Path, str]:
                 except ValueError as error:  # pyribs draws 1-D and 2-D grids only
                     run.notes.append(f"no heatmap: {error}")
                     continue
-                figure.savefig(out / f"{name}.png", dpi=100)
+                figure.savefig(out / f"{name}.png", dpi=HEATMAP_DPI)
+                if grids is not None:
+                    grids[run.path] = heatmap_grid(figure, run.archive)
                 plt.close(figure)
                 made[run.path] = f"{name}.png"
     return made

@@ -2,17 +2,20 @@
 
 :func:`build_document` lays out ``report.md`` / ``report.html``: the main and offset tables,
 the sources of the metrics, the Tukey table, the return profiles of the final archives,
-learning curves, heatmaps, the run list and the runs left out or unfinished.
+learning curves, heatmaps (clickable on the HTML page, :mod:`qdil.evaluation.explorer`),
+the run list and the runs left out or unfinished.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from qdil.evaluation import document as doc
-from qdil.evaluation.figures import colour_range
+from qdil.evaluation import explorer
+from qdil.evaluation.figures import HeatmapGrid, colour_range
+from qdil.evaluation.gallery import Gallery, VideoSettings
 from qdil.evaluation.profiles import profile_table
 from qdil.evaluation.runs import (
     Groups,
@@ -41,6 +44,7 @@ class Report:
         tukey: Tukey HSD results by task.
         main_table: the main table as Markdown.
         files: every file written, relative to ``out``.
+        gallery: the videos of elites (none where none were asked for or could be made).
     """
 
     out: Path
@@ -49,6 +53,7 @@ class Report:
     tukey: dict[str, TukeyResult]
     main_table: str
     files: list[str]
+    gallery: Gallery = field(default_factory=lambda: Gallery(VideoSettings(count=0)))
 
 
 def _problem_rows(runs: Sequence[RunResult]) -> list[list[str]]:
@@ -92,6 +97,7 @@ def build_document(
     heatmaps: Mapping[Path, str],
     curves: Mapping[str, list[tuple[str, str]]],
     profiles: Mapping[str, str] | None = None,
+    grids: Mapping[Path, HeatmapGrid] | None = None,
 ) -> list[doc.Block]:
     """The blocks of ``report.md`` / ``report.html``.
 
@@ -100,6 +106,8 @@ def build_document(
         heatmaps: run directory -> heatmap PNG.
         curves: task -> ``(metric label, PNG)`` pairs of the learning curves.
         profiles: task -> return-profile PNG; ``None`` leaves the section out.
+        grids: run directory -> where its heatmap PNG draws the cells: the HTML page's
+            heatmaps are clickable (``None``: plain images).
     """
     runs, groups = report.runs, report.groups
     included = [r for r in runs if r.included]
@@ -173,11 +181,20 @@ def build_document(
     for task, images in curves.items():
         blocks += [doc.heading(task, 3), doc.table(*_curve_row(images))]
     blocks += [doc.heading("Archive heatmaps")]
-    for task in groups:
+    if grids is not None and groups:
+        blocks += [doc.text(explorer.videos_text(report.gallery)), explorer.script_block()]
+    for number, task in enumerate(groups):
         vmin, vmax = colour_range(r.archive for rs in groups[task].values() for r in rs)
         scale = "empty archives" if vmin is None else f"colour scale {vmin:.4g} to {vmax:.4g}"
         blocks += [doc.heading(task, 3), doc.text(f"Final archives; {scale} for every run.")]
-        blocks += [doc.table(*_image_rows(groups, task, heatmaps))]
+        images = doc.table(*_image_rows(groups, task, heatmaps))
+        if grids is None:
+            blocks += [images]
+            continue
+        markdown = doc.to_markdown([images]).strip()
+        blocks += explorer.task_blocks(
+            number, groups[task], heatmaps, grids, report.gallery, report.out, markdown
+        )
     blocks += [doc.heading("Runs"), doc.table(*_runs_table(runs))]
     blocks += [doc.heading("Runs left out / unfinished")]
     blocks += [

@@ -30,8 +30,10 @@ page), ``table.md`` / ``table.csv`` (main table, the true-keyed archives),
 and GAIL's, with bootstrap intervals and the seeds a gap would need),
 ``runs.csv`` (every run, its status and final metrics), ``profile.csv`` (the return
 profiles' table, :mod:`qdil.evaluation.profiles`), ``heatmaps/*.png``, ``curves/*.png``,
-``profiles/*.png`` and ``runs/`` (a record of every included run, :mod:`qdil.evaluation.records`:
-the report can be made again from them when the run directories are gone).
+``profiles/*.png``, ``videos/`` (a few elites of every run, when asked for:
+:mod:`qdil.evaluation.gallery`) and ``runs/`` (a record of every included run,
+:mod:`qdil.evaluation.records`: the report can be made again from them when the run
+directories are gone).
 
 The pieces: :mod:`qdil.evaluation.tables` (numbers), :mod:`qdil.evaluation.figures`
 (heatmaps and curves) and :mod:`qdil.evaluation.page` (the document); this module collects
@@ -46,12 +48,14 @@ from pathlib import Path
 from qdil.evaluation import document as doc
 from qdil.evaluation.figures import (
     CURVE_METRICS,
+    HeatmapGrid,
     colour_range,
     method_curves,
     plot_curves,
     plot_heatmaps,
     plot_profiles,
 )
+from qdil.evaluation.gallery import VideoSettings, make_gallery
 from qdil.evaluation.page import Report, build_document
 from qdil.evaluation.profiles import profile_records
 from qdil.evaluation.records import Record, write_record
@@ -106,6 +110,7 @@ def write_report(
     labels: Mapping[str | Path, str] | None = None,
     reference: str | None = None,
     records: bool = True,
+    videos: VideoSettings | None = None,
 ) -> Report:
     """Collect runs and write the whole report into ``out``.
 
@@ -117,6 +122,8 @@ def write_report(
             ``None``).
         records: keep a record of every included run in ``out/runs/`` (see
             :mod:`qdil.evaluation.records`).
+        videos: how many videos of elites per run, and how they are drawn, for the HTML
+            page (``None``: none; ``qdil report`` makes 6 per run).
 
     Returns:
         What was written (also the data behind it).
@@ -129,10 +136,12 @@ def write_report(
     results = tukey_tests(groups, reference)
     table_md = doc.markdown_table(*main_table(groups)) if groups else ""
     report = Report(out, runs, groups, results, table_md, [])
-    heatmaps = plot_heatmaps(groups, out)
+    grids: dict[Path, HeatmapGrid] = {}
+    heatmaps = plot_heatmaps(groups, out, grids)
+    report.gallery = make_gallery(groups, out, heatmaps, videos or VideoSettings(count=0))
     curves = plot_curves(groups, out)
     profiles = plot_profiles(groups, out)
-    _write_files(report, heatmaps, curves, profiles)
+    _write_files(report, heatmaps, curves, profiles, grids)
     if records:
         report.files += keep_records(runs, out / "runs")
     return report
@@ -178,6 +187,7 @@ def _write_files(
     heatmaps: Mapping[Path, str],
     curves: Mapping[str, list[tuple[str, str]]],
     profiles: Mapping[str, str],
+    grids: Mapping[Path, HeatmapGrid],
 ) -> None:
     out, groups = report.out, report.groups
     table_md = report.main_table + "\n\n" + doc.markdown_table(*offset_table(groups)) + "\n"
@@ -201,11 +211,13 @@ def _write_files(
     write_csv(out / "runs.csv", run_rows, list(run_rows[0]) if run_rows else ["path"])
     profile_fields = ["task", "method", "return_at_least", "cells_pct_mean", "cells_pct_std", "n"]
     write_csv(out / "profile.csv", profile_records(groups), profile_fields)
-    blocks = build_document(report, heatmaps, curves, profiles)
+    blocks = build_document(report, heatmaps, curves, profiles, grids)
     (out / "report.md").write_text(doc.to_markdown(blocks))
     (out / "report.html").write_text(doc.to_html(blocks, "qdil report"))
     written = ["report.md", "report.html", "table.md", "table.csv", "tukey.md", "tukey.csv"]
     written += ["table_deployable.md", "table_deployable.csv", "ratios.csv"]
     written += ["runs.csv", "profile.csv", *heatmaps.values(), *profiles.values()]
     written += [path for images in curves.values() for _, path in images]
+    videos = [v for vs in report.gallery.videos.values() for v in vs]
+    written += [video.path.relative_to(out).as_posix() for video in videos]
     report.files = written

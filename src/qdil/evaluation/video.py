@@ -23,18 +23,14 @@ import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
 from qdil.demos.generate import farthest_point_sampling
+from qdil.envs.rendering import CAMERA_DISTANCE
 from qdil.envs.vector import LocomotionVectorEnv
 from qdil.evaluation.gl import use_gl_backend
 from qdil.evaluation.rescore import ReplaySettings, elite_policies
+from qdil.evaluation.video_files import FORMATS, VideoWriter, video_paths
 from qdil.qd.checkpoint import load_archive
 from qdil.rl.episodes import EpisodePlayer
 from qdil.rl.sampler import PolicySampler
-
-FORMATS = ("mp4", "gif")
-"""Video formats, by file suffix."""
-
-CAMERA_DISTANCE = {"Hopper-v5": 3.0}
-"""Camera distance (m) where gymnasium's default camera is not 4 m away."""
 
 _ON, _OFF = (80, 220, 100), (90, 90, 90)  # foot marker colours: touching, in the air
 
@@ -140,67 +136,6 @@ class FrameRenderer:
     def close(self) -> None:
         """Free the renderer's OpenGL context."""
         self.renderer.close()
-
-
-class VideoWriter:
-    """Writes frames to an MP4 (ffmpeg, streamed) or a GIF (Pillow, on :meth:`close`).
-
-    Args:
-        path: the file; its suffix picks the format.
-        fps: frames per second.
-    """
-
-    def __init__(self, path: Path, fps: float) -> None:
-        self.path, self.fps = path, fps
-        self.count = 0
-        self._gif: list[Image.Image] = []
-        self._mp4: Any = None
-        path.parent.mkdir(parents=True, exist_ok=True)
-        if path.suffix.lower() == ".mp4":
-            import imageio.v2 as imageio
-
-            self._mp4 = imageio.get_writer(
-                path, format="FFMPEG", mode="I", fps=fps, codec="libx264", macro_block_size=2
-            )
-
-    def append(self, frame: np.ndarray) -> None:
-        """Add an (H, W, 3) uint8 frame."""
-        self.count += 1
-        if self._mp4 is not None:
-            self._mp4.append_data(frame)
-        else:  # 256 colours now: a GIF's frames are kept until the end
-            self._gif.append(Image.fromarray(frame).quantize(method=Image.Quantize.FASTOCTREE))
-
-    def close(self) -> None:
-        """Finish the file."""
-        if self._mp4 is not None:
-            self._mp4.close()
-        elif self._gif:
-            self._gif[0].save(
-                self.path,
-                save_all=True,
-                append_images=self._gif[1:],
-                duration=round(1000 / self.fps),
-                loop=0,
-            )
-
-
-def video_paths(out: Path, cells: list[tuple[int, ...]], which: str, fmt: str) -> list[Path]:
-    """Where the videos of ``cells`` go: ``out`` itself, or ``out/{which}_cell_I_J.{fmt}``.
-
-    Raises:
-        ValueError: for an unknown suffix, or a file given for several videos.
-    """
-    if out.suffix:
-        if out.suffix.lower() not in (f".{name}" for name in FORMATS):
-            raise ValueError(
-                f"--out {out}: unknown video suffix {out.suffix!r}; give a .mp4 or .gif file, "
-                "or a folder"
-            )
-        if len(cells) > 1:
-            raise ValueError(f"--out {out}: {len(cells)} videos need a folder, not a file")
-        return [out]
-    return [out / f"{which}_cell_{'_'.join(map(str, cell))}.{fmt}" for cell in cells]
 
 
 def select_rows(
@@ -353,6 +288,52 @@ def render_elites(
     rows = select_rows(archive, elites, cell, top)
     cells = [tuple(int(i) for i in c) for c in archive.int_to_grid_index(elites["index"][rows])]
     paths = video_paths(out, cells, which, fmt)
+    options = {"max_steps": max_steps, "seed": seed, "fps": fps, "high_quality": high_quality}
+    label = f"{which} archive"
+    return render_rows(run_dir, elites, rows, cells, paths, label, width, height, **options)
+
+
+def render_rows(
+    run_dir: str | Path,
+    elites: dict[str, np.ndarray],
+    rows: np.ndarray,
+    cells: list[tuple[int, ...]],
+    paths: list[Path],
+    label: str,
+    width: int = 480,
+    height: int = 320,
+    *,
+    max_steps: int | None = None,
+    seed: int = 0,
+    fps: float = 30.0,
+    high_quality: bool = False,
+) -> list[Video]:
+    """Render one deterministic episode of each of ``rows`` of an archive's elites.
+
+    The replay of :func:`render_elites`, for a caller that holds the archive already
+    (``qdil report`` renders from the corrected archive of ``qdil eval`` where there is one).
+
+    Args:
+        run_dir: the run directory (its recipe gives the task and the policy's shape).
+        elites: pyribs archive data with ``index``, ``solution``, ``measures`` and the
+            observation statistics ``obs_mean``, ``obs_var``, ``obs_count``.
+        rows: (n,) rows of ``elites`` to render.
+        cells: their n grid cells.
+        paths: n video files (.mp4 or .gif).
+        label: which archive, for the title drawn on the frames.
+        width: frame width in pixels.
+        height: frame height in pixels.
+        max_steps: horizon (``None``: the run's).
+        seed: reset seed of every episode.
+        fps: asked frame rate; frames are every ``round(1 / (dt · fps))`` env steps.
+        high_quality: shadows, the floor's reflection and anti-aliasing.
+
+    Returns:
+        The videos, in the order of ``rows``.
+
+    Raises:
+        GLUnavailableError: no OpenGL backend works here.
+    """
     use_gl_backend()
     settings = ReplaySettings.of_run(run_dir)
     env = settings.make_env(1, num_threads=1, max_episode_steps=max_steps)
@@ -360,12 +341,12 @@ def render_elites(
     painter = FrameRenderer(env, width, height, high_quality)
     videos = []
     try:
-        for row, cell_index, path in zip(rows, cells, paths, strict=True):
+        for row, cell, path in zip(rows, cells, paths, strict=True):
             actor, stats = elite_policies(elites, np.array([row]), env, settings.actor_hidden)
             sampler = PolicySampler(actor, stats, settings.obs_clip)
             measures = " ".join(f"{m:.2f}" for m in elites["measures"][row])
-            title = f"{settings.task} {which} archive, cell {cell_index}: measures {measures}"
-            videos.append(record(env, sampler, painter, path, title, seed, stride, cell_index))
+            title = f"{settings.task} {label}, cell {cell}: measures {measures}"
+            videos.append(record(env, sampler, painter, path, title, seed, stride, cell))
     finally:
         painter.close()
     return videos
