@@ -261,6 +261,7 @@ def fit(argv: list[str]) -> None:
     from qdil.qd.loop import run_qd
     from qdil.rewards.base import NonFiniteRewardError
     from qdil.rl.execution import ExecutorError
+    from qdil.tracking import check_wandb_login
 
     config, resume_dir, stem = parse_fit(argv)
     parser = fit_parser()
@@ -277,13 +278,23 @@ def fit(argv: list[str]) -> None:
             )
     config.name = name
     resolved = parser.dump(config, skip_unset=False)
-    for path in remove_stale_temporaries(run_dir, run_dir / CHECKPOINT.parent):
-        print(f"removed {path}, left by a killed write", file=sys.stderr)
     state = None
     if resume_dir is not None and (run_dir / CHECKPOINT).exists():
         state = read_checkpoint(run_dir / CHECKPOINT)
         _check_unchanged(state, yaml.safe_load(resolved), run_dir, config_differences)
-    elif resume_dir is not None:
+        if state["iteration"] >= config.qd.iterations:  # nothing to run: nothing to write
+            print(
+                f"{run_dir} is finished: iteration {state['iteration']} of "
+                f"{config.qd.iterations}; nothing to do (--qd.iterations N continues it to N)",
+                file=sys.stderr,
+            )
+            return
+    problem = check_wandb_login(config.logging.wandb)  # before the run writes anything
+    if problem is not None:
+        raise SystemExit(f"qdil fit: error: {problem}")
+    for path in remove_stale_temporaries(run_dir, run_dir / CHECKPOINT.parent):
+        print(f"removed {path}, left by a killed write", file=sys.stderr)
+    if resume_dir is not None and state is None:
         print(
             f"{run_dir} has no checkpoint (the run stopped before its first one); "
             f"starting it over from its {CONFIG_NAME}",
