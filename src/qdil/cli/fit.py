@@ -123,30 +123,52 @@ def _reward_class(class_path: str) -> type | None:
         return None
 
 
-def run_stem(stem: str, recipe: dict, config: Namespace) -> str:
-    """The stem of a new run's default name (``<stem>-seed<seed>``).
+BONUS_TAGS = ("bonus", "ebc")
+"""Name parts of an enabled bonus, by ``bonus.type`` (``single_step``, ``ebc``), as the
+shipped recipes spell them (``walker_mcwae_gail_bonus``, ``walker_gail_ebc``)."""
 
-    The recipe file's stem, unless the command line replaced the recipe's reward model
-    (``--reward gail``): then the stem's first ``_``-separated part and the registered name
-    of the model that runs, so that the name says what ran: ``walker_mcwae.yaml --reward
-    gail`` gives ``walker_gail`` (a class without a registered name: its name in lower case).
-    A recipe run as it is, or with other options of its own model, keeps its stem.
+
+def _bonus_tag(bonus: Any) -> str:
+    """``bonus``, ``ebc`` or ``""`` (disabled) for a bonus section (a mapping or namespace)."""
+    if not bonus.get("enabled", False):  # BonusConfig's defaults
+        return ""
+    return "ebc" if bonus.get("type", "single_step") == "ebc" else "bonus"
+
+
+def run_stem(stem: str, recipe: dict, config: Namespace) -> str:
+    """The stem of a new run's default name (``<stem>-seed<seed>``): what ran, in words.
+
+    The recipe file's stem, unless the command line changed the method. When it replaced
+    the recipe's reward model (``--reward gail``), the stem's first ``_``-separated part,
+    the registered name of the model that runs and, if a bonus is on, ``_bonus`` or
+    ``_ebc``: ``walker_mcwae.yaml --reward gail --bonus.enabled false`` gives
+    ``walker_gail``, without ``--bonus.enabled false`` ``walker_gail_bonus`` (a class
+    without a registered name: its name in lower case). When only the bonus was switched
+    (on, off, or to the other type), the stem without its bonus part, then the bonus that
+    runs: ``walker_gail.yaml --bonus.enabled true --bonus.type ebc`` gives
+    ``walker_gail_ebc``, ``walker_gail_ebc.yaml --bonus.enabled false`` ``walker_gail``,
+    and ``walker_mcwae.yaml --bonus.enabled false``, whose stem names no bonus,
+    ``walker_mcwae_nobonus``. A recipe run as it is, or with other options, keeps its stem.
 
     Args:
         stem: the recipe file's stem.
         recipe: the recipe file's content, reward names resolved to class paths.
         config: the parsed configuration, command-line overrides applied.
     """
+    tag = _bonus_tag(config.bonus)
     reward = recipe.get("reward")
     written = reward.get("class_path") if isinstance(reward, dict) else reward
     running = getattr(config.reward, "class_path", None)
-    if not isinstance(written, str) or not isinstance(running, str) or written == running:
+    cls = _reward_class(running) if isinstance(running, str) and running != written else None
+    if cls is not None and isinstance(written, str) and cls is not _reward_class(written):
+        name = getattr(cls, "name", "") or cls.__name__.lower()
+        return f"{stem.split('_', 1)[0]}_{name}" + (f"_{tag}" if tag else "")
+    if tag == _bonus_tag(recipe.get("bonus") or {}):
         return stem
-    cls = _reward_class(running)
-    if cls is None or cls is _reward_class(written):
-        return stem
-    name = getattr(cls, "name", "") or cls.__name__.lower()
-    return f"{stem.split('_', 1)[0]}_{name}"
+    base, _, last = stem.rpartition("_")
+    if base and last in BONUS_TAGS:  # the stem names the recipe's bonus: replace it
+        return f"{base}_{tag}" if tag else base
+    return f"{stem}_{tag or 'nobonus'}"
 
 
 def _help_request(argv: list[str]) -> list[str] | None:
