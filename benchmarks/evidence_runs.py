@@ -15,7 +15,7 @@ that takes the run continues it bit for bit. A run whose record a report keeps u
 ``docs/reports/evidence-<task>/runs/`` is done, on any machine::
 
     qdil report runs/evidence/halfcheetah_* docs/reports/evidence-halfcheetah/runs \
-        --out docs/reports/evidence-halfcheetah
+        --out docs/reports/evidence-halfcheetah --force
 """
 
 from __future__ import annotations

@@ -17,6 +17,7 @@ from __future__ import annotations
 import csv
 import math
 import os
+import secrets
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
 
@@ -57,6 +58,63 @@ class TrackedRun(Protocol):
     @property
     def state(self) -> _Counters:
         """Its counters (``iteration``: the step of the final table)."""
+
+
+WANDB_ID = Path("wandb") / "qdil-run-id"
+"""Where a run directory keeps its W&B run id (relative to the run directory)."""
+
+
+def wandb_run_id(run_dir: Path, name: str) -> str:
+    """The W&B run id of the run in ``run_dir``: made at its first start, read on every resume.
+
+    A new id is the run's name and a random suffix, so that two runs of the same name (the
+    same recipe and seed on two machines, or a run directory deleted and started again)
+    never continue each other's W&B run; every start of one run uses the id kept in
+    :data:`WANDB_ID`, so a resume continues the same W&B run.
+
+    Args:
+        run_dir: the run directory.
+        name: the run's name.
+    """
+    path = run_dir / WANDB_ID
+    if path.is_file():
+        return path.read_text().strip()
+    if path.parent.is_dir():  # started before ids were kept: its W&B id was its name
+        run_id = name.replace("/", "-")
+    else:
+        run_id = f"{name.replace('/', '-')}-{secrets.token_hex(4)}"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(run_id + "\n")
+    return run_id
+
+
+def check_wandb_login(mode: str) -> str | None:
+    """Why ``logging.wandb: online`` cannot log from here, or ``None`` if it can.
+
+    Checked before a run does any work: wandb itself asks for the key only when the run
+    starts, after the envs, the reward model and its pretraining are built. Any key counts
+    that wandb would use (``WANDB_API_KEY``, ``wandb login``'s ``.netrc`` entry, a settings
+    file); it is verified with the server, which an online run needs anyway.
+
+    Args:
+        mode: ``logging.wandb`` (only ``online`` is checked).
+    """
+    if mode != "online":
+        return None
+    import wandb
+
+    # the recipe's mode, not $WANDB_MODE, decides: wandb.init(mode="online") overrides it
+    wandb.setup(settings=wandb.Settings(mode="online"))
+    try:
+        if wandb.login(verify=True, prompt=False):
+            return None
+        problem = "no W&B API key found"
+    except Exception as error:  # a rejected key, an unreachable server
+        problem = str(error).splitlines()[0] if str(error) else type(error).__name__
+    return (
+        f"--logging.wandb online needs a W&B login ({problem}): run `wandb login` or set "
+        "WANDB_API_KEY, or log offline (--logging.wandb offline) and `wandb sync` later"
+    )
 
 
 class MetricsCSV:
@@ -147,7 +205,7 @@ class Tracker:
     Args:
         run_dir: the run directory.
         logging: the recipe's logging section.
-        name: the run name (W&B run name and id).
+        name: the run name (W&B run name; the id is :func:`wandb_run_id`).
         config: the resolved recipe, logged to W&B.
     """
 
@@ -162,9 +220,12 @@ class Tracker:
 
             # the run is started here rather than by the logger, whose wandb.init passes
             # ``anonymous``, a setting wandb 0.31 warns about on every run
+            # "allow": the first start creates the W&B run, every resume continues it (offline,
+            # each start writes its own offline-run-* folder of that id; `wandb sync` of them
+            # all uploads them into the one run, in order)
             experiment = wandb.init(
                 name=name,
-                id=name.replace("/", "-"),
+                id=wandb_run_id(run_dir, name),
                 project=logging.wandb_project,
                 dir=str(run_dir),
                 mode=logging.wandb,

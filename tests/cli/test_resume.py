@@ -157,6 +157,52 @@ def test_a_checkpoint_from_before_the_deployable_archive_resumes_and_is_scored(
     assert iteration == 2 and len(archive) > 0  # filled from iteration 2 on
 
 
+def files(folder: Path) -> dict[str, bytes]:
+    return {str(p.relative_to(folder)): p.read_bytes() for p in folder.rglob("*") if p.is_file()}
+
+
+def test_a_finished_run_resumed_says_so_and_writes_nothing(
+    finished: Path, tmp_path: Path, monkeypatch, capsys
+) -> None:
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.delenv("QDIL_PLUGIN_PATH", raising=False)  # only ./plugins, absent here
+    shutil.copytree(finished, tmp_path / "done")
+    before = files(tmp_path)
+    main(["fit", "--resume", "done", "--logging.wandb", "offline"])
+    assert capsys.readouterr().err.strip().splitlines() == [
+        "done is finished: iteration 1 of 1; nothing to do (--qd.iterations N continues it to N)"
+    ]
+    assert files(tmp_path) == before  # no W&B folder, no provenance entry, nothing
+
+
+def test_a_resume_online_without_a_login_stops_before_writing(
+    finished: Path, tmp_path: Path
+) -> None:
+    run_dir = tmp_path / "online"
+    shutil.copytree(finished, run_dir)
+    before = files(run_dir)
+    env = {k: v for k, v in os.environ.items() if not k.startswith("WANDB_")}
+    env |= {"HOME": str(tmp_path), "NETRC": str(tmp_path / "no-netrc")}  # never logged in
+    env.pop("QDIL_PLUGIN_PATH", None)
+    args = ["--resume", str(run_dir), "--qd.iterations", "2", "--logging.wandb", "online"]
+    done = subprocess.run(
+        [sys.executable, "-m", "qdil.cli", "fit", *args],
+        cwd=tmp_path,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert done.returncode != 0
+    assert (
+        done.stderr.strip()
+        .splitlines()[-1]
+        .startswith("qdil fit: error: --logging.wandb online needs a W&B login")
+    ), done.stderr
+    assert "Traceback" not in done.stderr
+    assert files(run_dir) == before
+
+
 def test_a_resume_may_change_iterations_threads_and_logging_only() -> None:
     stored = {"qd": {"iterations": 3, "cells": 10}, "env": {"num_threads": None, "task": "W"}}
     stored["logging"] = {"progress": False, "checkpoint_every": 2}

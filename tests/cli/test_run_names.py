@@ -1,4 +1,4 @@
-"""A new run's default name says which reward model ran (``qdil fit`` parses only, here)."""
+"""A new run's default name says which method ran: reward model and bonus (parsing only)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,8 @@ import pytest
 from qdil.cli import parse_fit
 
 ROOT = Path(__file__).resolve().parents[2]
-FLAGSHIP = str(ROOT / "recipes" / "walker_mcwae.yaml")
+RECIPES = ROOT / "recipes"
+FLAGSHIP = str(RECIPES / "walker_mcwae.yaml")
 SMOKE_IL = str(ROOT / "recipes" / "smoke" / "walker_il.yaml")
 
 
@@ -23,16 +24,32 @@ SMOKE_IL = str(ROOT / "recipes" / "smoke" / "walker_il.yaml")
         ([FLAGSHIP, "--reward", "mcwae_wgail"], "walker_mcwae"),
         ([FLAGSHIP, "--reward", "qdil.rewards.builtin.MCWAEWGAIL"], "walker_mcwae"),
         ([SMOKE_IL], "walker_il"),
-        # another model: the recipe's first part and the model's registered name
+        ([FLAGSHIP, "--bonus.weight", "1.0"], "walker_mcwae"),
+        # another model: the recipe's first part, the model's registered name, the bonus
         ([FLAGSHIP, "--reward", "gail", "--bonus.enabled", "false"], "walker_gail"),
-        ([FLAGSHIP, "--reward=airl"], "walker_airl"),
-        ([FLAGSHIP, "--reward", "qdil.rewards.builtin.GAIL"], "walker_gail"),
+        ([FLAGSHIP, "--reward=airl"], "walker_airl_bonus"),  # the flagship's bonus stays on
+        ([FLAGSHIP, "--reward", "qdil.rewards.builtin.GAIL"], "walker_gail_bonus"),
+        ([FLAGSHIP, "--reward", "gail", "--bonus.type", "ebc"], "walker_gail_ebc"),
         ([SMOKE_IL, "--reward", "pwil"], "walker_pwil"),
+        # the bonus switched on, off or to the other type: the name says which runs
+        ([FLAGSHIP, "--bonus.enabled", "false"], "walker_mcwae_nobonus"),
+        ([FLAGSHIP, "--bonus.type", "ebc"], "walker_mcwae_ebc"),
+        ([RECIPES / "walker_gail.yaml", "--bonus.enabled", "true"], "walker_gail_bonus"),
+        ([RECIPES / "walker_gail_ebc.yaml", "--bonus.enabled", "false"], "walker_gail"),
+        ([RECIPES / "walker_gail_ebc.yaml", "--bonus.type", "single_step"], "walker_gail_bonus"),
+        ([SMOKE_IL, "--bonus.enabled", "true"], "walker_il_bonus"),
     ],
 )
-def test_the_default_name_follows_the_reward_model_that_runs(argv: list[str], stem: str) -> None:
-    _, _, got = parse_fit(argv)
+def test_the_default_name_follows_the_method_that_runs(argv: list, stem: str) -> None:
+    _, _, got = parse_fit([str(arg) for arg in argv])
     assert got == stem
+
+
+def test_every_shipped_recipe_keeps_its_name() -> None:
+    shipped = sorted(RECIPES.rglob("*.yaml"))
+    assert len(shipped) > 40
+    for recipe in shipped:
+        assert parse_fit([str(recipe)])[2] == recipe.stem, recipe
 
 
 def test_a_recipe_without_underscore_keeps_its_name_in_front(tmp_path: Path) -> None:

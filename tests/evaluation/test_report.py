@@ -22,6 +22,7 @@ from ribs.archives import GridArchive
 from scipy.stats import tukey_hsd
 
 from qdil.evaluation import document as doc
+from qdil.evaluation.configurations import flag_duplicate_seeds
 from qdil.evaluation.profiles import archive_profile, method_profile, profile_levels
 from qdil.evaluation.report import (
     colour_range,
@@ -34,7 +35,6 @@ from qdil.evaluation.runs import (
     RunResult,
     collect_runs,
     find_runs,
-    flag_duplicate_seeds,
     group_runs,
     method_label,
 )
@@ -624,3 +624,16 @@ def test_eval_and_report_read_each_checkpoint_once(
     reads.clear()
     runs_module.load_run(run)
     assert len(reads) == 1
+
+
+def test_runs_of_one_label_and_another_configuration_are_not_pooled(
+    made: SimpleNamespace, tmp_path: Path
+) -> None:
+    runs = made.runs
+    wider = copy_run(runs / "true0", tmp_path / "wider0", qd={"cells": 20})  # same seed, label
+    report = write_report([runs / f"true{seed}" for seed in range(3)] + [wider], tmp_path / "out")
+    rows = {method: len(group) for method, group in report.groups["Walker2d-v5"].items()}
+    assert rows == {"PPGA-trueReward [qd.cells=10]": 3, "PPGA-trueReward [qd.cells=20]": 1}
+    (run,) = [r for r in report.runs if r.path == wider]
+    assert "differs in qd.cells" in run.notes[-1]
+    assert not any("also used by" in note for r in report.runs for note in r.notes)

@@ -1,5 +1,7 @@
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 from ribs.schedulers import Scheduler
@@ -128,6 +130,30 @@ def test_works_inside_a_pyribs_scheduler(archive) -> None:
         )
         emitter.theta = theta[0] + 0.1
     assert len(archive) > 5
+
+
+def test_the_loop_silences_only_the_empty_archive_warning() -> None:
+    """A θ_μ below threshold_min leaves the archive empty: expected, so not shouted about."""
+    from qdil.qd.loop import quiet_empty_archive
+
+    high = make_grid(
+        solution_dim=DIM,
+        cells=[5, 5],
+        extra_fields=elite_fields(OBS),
+        learning_rate=0.5,
+        threshold_min=200.0,
+    )
+    scheduler = Scheduler(high, [make_emitter(high)], add_mode="batch")
+    jacobian = np.zeros((1, 3, DIM))
+    scheduler.ask_dqd()
+    with pytest.warns(UserWarning, match="threshold_min"):  # pyribs' own, outside the loop
+        scheduler.tell_dqd(np.array([5.0]), np.array([[0.5, 0.5]]), jacobian, **fields(1))
+    scheduler.ask_dqd()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # any other warning still surfaces
+        with quiet_empty_archive():
+            scheduler.tell_dqd(np.array([5.0]), np.array([[0.5, 0.5]]), jacobian, **fields(1))
+    assert high.empty
 
 
 def test_strategies_resolve_by_name_or_path() -> None:

@@ -1,4 +1,5 @@
-"""W&B logging, offline: the run files hold the logged metrics, images and table."""
+"""W&B logging: offline run files hold the metrics, images and table; a resume continues the
+W&B run; a finished run resumed writes nothing; online without a login stops before any work."""
 
 from __future__ import annotations
 
@@ -53,30 +54,39 @@ def history(run_file: Path) -> list[dict]:
     return rows
 
 
-def test_offline_wandb_run_contains_metrics_images_and_table(tmp_path: Path) -> None:
-    # not silenced: the run's output is what a user sees
-    env = {k: v for k, v in os.environ.items() if k != "WANDB_SILENT"} | {"WANDB_MODE": "offline"}
-    done = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "qdil.cli",
-            "fit",
-            str(SMOKE),
-            "--name",
-            "wb",
-            "--logging.wandb",
-            "offline",
-            "--logging.heatmap_every",
-            "2",
-        ],
-        cwd=tmp_path,
+def run_record(run_file: Path):
+    """The run record (id, resume setting) of an offline W&B run."""
+    from wandb.proto import wandb_internal_pb2
+
+    for data in records(run_file):
+        record = wandb_internal_pb2.Record()
+        record.ParseFromString(data)
+        if record.WhichOneof("record_type") == "run":
+            return record.run
+    raise AssertionError(f"no run record in {run_file}")
+
+
+def qdil(*args: str, cwd: Path, env: dict[str, str]) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "qdil.cli", *args],
+        cwd=cwd,
         env=env,
-        check=True,
         capture_output=True,
         text=True,
-        timeout=600,
+        timeout=900,
     )
+
+
+def files(folder: Path) -> dict[str, bytes]:
+    return {str(p.relative_to(folder)): p.read_bytes() for p in folder.rglob("*") if p.is_file()}
+
+
+def test_offline_wandb_run_holds_the_metrics_and_a_resume_continues_it(tmp_path: Path) -> None:
+    # not silenced: the run's output is what a user sees
+    env = {k: v for k, v in os.environ.items() if k != "WANDB_SILENT"} | {"WANDB_MODE": "offline"}
+    args = ["--logging.wandb", "offline", "--logging.heatmap_every", "2"]
+    done = qdil("fit", str(SMOKE), "--name", "wb", *args, cwd=tmp_path, env=env)
+    assert done.returncode == 0, done.stderr[-3000:]
     assert "wandb: WARNING" not in done.stderr + done.stdout, done.stderr
     folders = list((tmp_path / "runs" / "wb" / "wandb").glob("offline-run-*"))
     assert len(folders) == 1
@@ -97,3 +107,62 @@ def test_offline_wandb_run_contains_metrics_images_and_table(tmp_path: Path) -> 
     assert "objective" in table["columns"] and len(table["data"]) >= 1
     csv_rows = (tmp_path / "runs" / "wb" / "metrics.csv").read_text().strip().splitlines()
     assert len(csv_rows) == 4  # CSV logging always happens
+
+    # a resume continues the same W&B run: offline, wandb writes each start into a folder
+    # of its own, with the run's id, and `wandb sync` uploads them in order as one run
+    run_dir = tmp_path / "runs" / "wb"
+    run_id = (run_dir / "wandb" / "qdil-run-id").read_text().strip()
+    assert run_id.startswith("wb-") and run_record(run_file).run_id == run_id
+    more = qdil("fit", "--resume", "runs/wb", "--qd.iterations", "4", cwd=tmp_path, env=env)
+    assert more.returncode == 0, more.stderr[-3000:]
+    assert "wandb: WARNING" not in more.stderr + more.stdout, more.stderr
+    second = set(run_dir.glob("wandb/offline-run-*")) - set(folders)
+    assert len(second) == 1
+    resumed = next(second.pop().glob("run-*.wandb"))
+    assert run_record(resumed).run_id == run_id and run_record(resumed).resume
+    steps = sorted({row["trainer/global_step"] for row in history(resumed) if "qd/qd_score" in row})
+    assert steps == [4]
+
+    # a finished run resumed: one line, and not a byte written (no W&B run either)
+    before = files(run_dir)
+    again = qdil("fit", "--resume", "runs/wb", cwd=tmp_path, env=env)
+    assert again.returncode == 0, again.stderr[-3000:]
+    assert again.stderr.strip().splitlines() == [
+        "runs/wb is finished: iteration 4 of 4; nothing to do (--qd.iterations N continues it to N)"
+    ]
+    assert files(run_dir) == before
+
+
+def logged_out(home: Path) -> dict[str, str]:
+    """The environment of a user who never ran `wandb login`: no key, no .netrc, no settings."""
+    import matplotlib
+
+    env = {k: v for k, v in os.environ.items() if not k.startswith("WANDB_")}
+    env |= {"HOME": str(home), "NETRC": str(home / "no-netrc"), "XDG_CONFIG_HOME": str(home)}
+    # matplotlib's font cache, so that a fresh home does not rebuild it (and say so)
+    return env | {"MPLCONFIGDIR": matplotlib.get_cachedir()}
+
+
+def test_online_without_a_login_stops_before_any_work_in_one_line(tmp_path: Path) -> None:
+    work = tmp_path / "work"
+    work.mkdir()
+    done = qdil("fit", str(SMOKE), "--logging.wandb", "online", cwd=work, env=logged_out(tmp_path))
+    assert done.returncode != 0
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1, done.stderr
+    assert lines[0].startswith("qdil fit: error: --logging.wandb online needs a W&B login")
+    assert "wandb login" in lines[0] and "--logging.wandb offline" in lines[0]
+    assert list(work.iterdir()) == []  # no run directory, nothing else
+
+
+def test_a_run_keeps_its_wandb_id(tmp_path: Path) -> None:
+    from qdil.tracking import WANDB_ID, wandb_run_id
+
+    first = wandb_run_id(tmp_path / "a", "walker_mcwae-seed0")
+    assert first.startswith("walker_mcwae-seed0-") and first != "walker_mcwae-seed0"
+    assert wandb_run_id(tmp_path / "a", "walker_mcwae-seed0") == first  # every resume
+    assert wandb_run_id(tmp_path / "b", "walker_mcwae-seed0") != first  # same name, new run
+    # a run started before ids were kept: wandb/ exists, and its id was its name
+    (tmp_path / "old" / "wandb").mkdir(parents=True)
+    assert wandb_run_id(tmp_path / "old", "x/y") == "x-y"
+    assert (tmp_path / "old" / WANDB_ID).read_text().strip() == "x-y"

@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from qdil.cli.args import plain_text
+from qdil.cli.names import run_stem
 from qdil.files import CONFIG_NAME
 
 # Only the standard library at import time (see qdil.cli): torch, Lightning and pyribs load
@@ -112,43 +113,6 @@ def _rewrite_reward_flag(argv: list[str]) -> list[str]:
     return out
 
 
-def _reward_class(class_path: str) -> type | None:
-    """The class at ``class_path`` (``module.Class``), or None if it does not import."""
-    import importlib
-
-    module, _, name = class_path.rpartition(".")
-    try:
-        return getattr(importlib.import_module(module), name)
-    except (ImportError, AttributeError, ValueError):
-        return None
-
-
-def run_stem(stem: str, recipe: dict, config: Namespace) -> str:
-    """The stem of a new run's default name (``<stem>-seed<seed>``).
-
-    The recipe file's stem, unless the command line replaced the recipe's reward model
-    (``--reward gail``): then the stem's first ``_``-separated part and the registered name
-    of the model that runs, so that the name says what ran: ``walker_mcwae.yaml --reward
-    gail`` gives ``walker_gail`` (a class without a registered name: its name in lower case).
-    A recipe run as it is, or with other options of its own model, keeps its stem.
-
-    Args:
-        stem: the recipe file's stem.
-        recipe: the recipe file's content, reward names resolved to class paths.
-        config: the parsed configuration, command-line overrides applied.
-    """
-    reward = recipe.get("reward")
-    written = reward.get("class_path") if isinstance(reward, dict) else reward
-    running = getattr(config.reward, "class_path", None)
-    if not isinstance(written, str) or not isinstance(running, str) or written == running:
-        return stem
-    cls = _reward_class(running)
-    if cls is None or cls is _reward_class(written):
-        return stem
-    name = getattr(cls, "name", "") or cls.__name__.lower()
-    return f"{stem.split('_', 1)[0]}_{name}"
-
-
 def _help_request(argv: list[str]) -> list[str] | None:
     """The first help flag of ``argv`` with its value (``--help``, ``--reward.help gail``)."""
     for i, arg in enumerate(argv):
@@ -182,7 +146,8 @@ def parse_fit(argv: list[str]) -> tuple[Namespace, Path | None, str]:
     """Parse ``qdil fit`` arguments; returns (config, run dir to resume or None, name stem).
 
     The values are checked here, before any run directory exists. The stem of a new run's
-    default name is the recipe's, or says which reward model replaced its own (:func:`run_stem`).
+    default name is the recipe's, or says what the command line ran
+    (:func:`qdil.cli.names.run_stem`).
 
     Raises:
         SystemExit: with a message naming the recipe key on a bad recipe.
@@ -261,6 +226,7 @@ def fit(argv: list[str]) -> None:
     from qdil.qd.loop import run_qd
     from qdil.rewards.base import NonFiniteRewardError
     from qdil.rl.execution import ExecutorError
+    from qdil.tracking import check_wandb_login
 
     config, resume_dir, stem = parse_fit(argv)
     parser = fit_parser()
@@ -277,13 +243,23 @@ def fit(argv: list[str]) -> None:
             )
     config.name = name
     resolved = parser.dump(config, skip_unset=False)
-    for path in remove_stale_temporaries(run_dir, run_dir / CHECKPOINT.parent):
-        print(f"removed {path}, left by a killed write", file=sys.stderr)
     state = None
     if resume_dir is not None and (run_dir / CHECKPOINT).exists():
         state = read_checkpoint(run_dir / CHECKPOINT)
         _check_unchanged(state, yaml.safe_load(resolved), run_dir, config_differences)
-    elif resume_dir is not None:
+        if state["iteration"] >= config.qd.iterations:  # nothing to run: nothing to write
+            print(
+                f"{run_dir} is finished: iteration {state['iteration']} of "
+                f"{config.qd.iterations}; nothing to do (--qd.iterations N continues it to N)",
+                file=sys.stderr,
+            )
+            return
+    problem = check_wandb_login(config.logging.wandb)  # before the run writes anything
+    if problem is not None:
+        raise SystemExit(f"qdil fit: error: {problem}")
+    for path in remove_stale_temporaries(run_dir, run_dir / CHECKPOINT.parent):
+        print(f"removed {path}, left by a killed write", file=sys.stderr)
+    if resume_dir is not None and state is None:
         print(
             f"{run_dir} has no checkpoint (the run stopped before its first one); "
             f"starting it over from its {CONFIG_NAME}",

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import subprocess
 import sys
 from pathlib import Path
 
@@ -81,6 +82,12 @@ def report(argv: list[str]) -> None:
         help="Tukey table: only pairs with this method, as group2 (the paper's layout)",
     )
     parser.add_argument(
+        "--force",
+        action="store_true",
+        help="write into OUT even where git tracks files in it (a report kept in the "
+        "repository, such as docs/reports/...); without it such an OUT is refused",
+    )
+    parser.add_argument(
         "--no-records",
         action="store_true",
         help="do not keep records of the runs in OUT/runs/ (config, curves, final archive "
@@ -102,6 +109,13 @@ def report(argv: list[str]) -> None:
         if not sep or not path or not label:
             parser.error(f"--label takes RUN_DIR=LABEL, got {item!r}")
         labels[path] = label
+    tracked = tracked_files(Path(args.out))
+    if tracked and not args.force:
+        raise SystemExit(
+            f"qdil report: error: git tracks {len(tracked)} file(s) in {args.out} (e.g. "
+            f"{tracked[0]}), which the report would overwrite; pass --force to update a "
+            "report kept in the repository, or choose another --out"
+        )
     from qdil.evaluation.gallery import VideoSettings
     from qdil.evaluation.report import write_report
 
@@ -136,3 +150,26 @@ def report(argv: list[str]) -> None:
         "qdil report: error: no run could be included (reasons above); give run directories "
         "made by qdil fit, or folders holding them"
     )
+
+
+def tracked_files(folder: Path) -> list[str]:
+    """The files git tracks in ``folder``; none outside a git work tree or without git.
+
+    Args:
+        folder: a folder, which need not exist yet.
+    """
+    anchor = folder.resolve()
+    while not anchor.is_dir():  # git runs in the nearest folder that exists
+        anchor = anchor.parent
+    try:
+        listed = subprocess.run(
+            ["git", "ls-files", "--full-name", "--", str(folder.resolve())],
+            cwd=anchor,
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
+    except (OSError, subprocess.TimeoutExpired):  # no git here: nothing to protect
+        return []
+    # outside a work tree git fails ("not a git repository"): no check either
+    return listed.stdout.splitlines() if listed.returncode == 0 else []

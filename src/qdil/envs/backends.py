@@ -50,8 +50,10 @@ def make_physics(
             num_threads=num_threads,
         )
     if backend == "warp":
-        from qdil.envs.warp_physics import WarpBatch  # optional dependency
+        from qdil.envs.warp_physics import WarpBatch, import_warp  # optional dependency
+        from qdil.envs.warp_startup import announce_warp_kernels
 
+        announce_warp_kernels(import_warp()[0])  # the first step may wait for a compile
         return WarpBatch(
             model, num_sims, exports, rne_post_constraint=rne_post_constraint, device=device
         )

@@ -33,72 +33,38 @@ state; its exported observation is the diverged one, as before.
 
 from __future__ import annotations
 
-import ctypes
 import os
 from collections.abc import Sequence
 from dataclasses import dataclass
-from pathlib import Path
 
 import mujoco
 import numba
 import numpy as np
-from numba import njit, prange
+from numba import prange
+
+from qdil.envs.mujoco_c import MUJOCO_C, cached_njit, call_pp, call_ppi, call_ppii
+
+# The kernels call MuJoCo through the addresses in ``c`` (qdil.envs.mujoco_c.MUJOCO_C), not
+# through ctypes globals, so that numba caches them on disk. numba rebuilds a cached kernel
+# when this file changes, not when mujoco_c.py does: edit both, or clear the cache.
 
 
-def _libmujoco() -> ctypes.CDLL:
-    """The MuJoCo shared library that the ``mujoco`` Python package already loaded."""
-    folder = Path(mujoco.__file__).parent
-    for pattern in ("libmujoco.so*", "libmujoco*.dylib", "mujoco.dll"):
-        found = sorted(folder.glob(pattern))
-        if found:
-            return ctypes.CDLL(str(found[0]))
-    raise ImportError(
-        f"could not find the MuJoCo shared library in {folder}; reinstall the `mujoco` package"
-    )
-
-
-_LIB = _libmujoco()
-# Pointers cross the ctypes boundary as 64-bit integers: numba passes int64 through to C
-# unchanged, and on every 64-bit ABI a pointer argument travels in the same register.
-_PTR = ctypes.c_int64
-
-
-def _c_function(name: str, *argtypes: type) -> ctypes._CFuncPtr:
-    function = getattr(_LIB, name)
-    function.argtypes = list(argtypes)
-    function.restype = None
-    return function
-
-
-_mj_step = _c_function("mj_step", _PTR, _PTR)
-_mj_step1 = _c_function("mj_step1", _PTR, _PTR)
-_mj_forward_skip = _c_function("mj_forwardSkip", _PTR, _PTR, ctypes.c_int, ctypes.c_int)
-_mj_check_acc = _c_function("mj_checkAcc", _PTR, _PTR)
-_mj_euler = _c_function("mj_Euler", _PTR, _PTR)
-_mj_runge_kutta = _c_function("mj_RungeKutta", _PTR, _PTR, ctypes.c_int)
-_mj_implicit = _c_function("mj_implicit", _PTR, _PTR)
-_mj_forward = _c_function("mj_forward", _PTR, _PTR)
-_mj_reset_data = _c_function("mj_resetData", _PTR, _PTR)
-_mj_rne_post_constraint = _c_function("mj_rnePostConstraint", _PTR, _PTR)
-_mju_copy = _c_function("mju_copy", _PTR, _PTR, ctypes.c_int)
-
-
-@njit(nogil=True)
-def _copy_out(i, sources, lengths, offsets, out):  # pragma: no cover - numba
+@cached_njit(nogil=True)
+def _copy_out(c, i, sources, lengths, offsets, out):  # pragma: no cover - numba
     base = out.ctypes.data + i * out.shape[1] * 8
     for f in range(sources.shape[0]):
-        _mju_copy(base + offsets[f] * 8, sources[f, i], lengths[f])
+        call_ppi(c.mju_copy, base + offsets[f] * 8, sources[f, i], lengths[f])
 
 
-@njit(nogil=True)
-def _reset_one(model, data, qpos_ptr, qvel_ptr, qpos, qvel, j):  # pragma: no cover - numba
+@cached_njit(nogil=True)
+def _reset_one(c, model, data, qpos_ptr, qvel_ptr, qpos, qvel, j):  # pragma: no cover - numba
     """Exactly gymnasium's MujocoEnv.reset + set_state: reset, write row j's state, forward."""
     nq = qpos.shape[1]
     nv = qvel.shape[1]
-    _mj_reset_data(model, data)
-    _mju_copy(qpos_ptr, qpos.ctypes.data + j * nq * 8, nq)
-    _mju_copy(qvel_ptr, qvel.ctypes.data + j * nv * 8, nv)
-    _mj_forward(model, data)
+    call_pp(c.mj_reset_data, model, data)
+    call_ppi(c.mju_copy, qpos_ptr, qpos.ctypes.data + j * nq * 8, nq)
+    call_ppi(c.mju_copy, qvel_ptr, qvel.ctypes.data + j * nv * 8, nv)
+    call_pp(c.mj_forward, model, data)
 
 
 # MuJoCo's mjtStage and mjtIntegrator values, as plain ints for the kernel
@@ -108,26 +74,27 @@ _IMPLICIT = int(mujoco.mjtIntegrator.mjINT_IMPLICIT)
 _IMPLICITFAST = int(mujoco.mjtIntegrator.mjINT_IMPLICITFAST)
 
 
-@njit(nogil=True)
-def _first_substep(model, data, integrator):  # pragma: no cover - numba
+@cached_njit(nogil=True)
+def _first_substep(c, model, data, integrator):  # pragma: no cover - numba
     """``mj_step`` on data whose position and velocity stages ran at the current state.
 
     What ``mj_step`` does after ``mj_checkPos``, ``mj_checkVel`` and those two stages (which
     ``mj_step1`` at the end of the previous step, or a reset's ``mj_forward``, did): the
     acceleration stage with the new controls, ``mj_checkAcc`` and the integrator.
     """
-    _mj_forward_skip(model, data, _STAGE_VEL, 0)
-    _mj_check_acc(model, data)
+    call_ppii(c.mj_forward_skip, model, data, _STAGE_VEL, 0)
+    call_pp(c.mj_check_acc, model, data)
     if integrator == _RK4:
-        _mj_runge_kutta(model, data, 4)
+        call_ppi(c.mj_runge_kutta, model, data, 4)
     elif integrator in (_IMPLICIT, _IMPLICITFAST):
-        _mj_implicit(model, data)
+        call_pp(c.mj_implicit, model, data)
     else:
-        _mj_euler(model, data)
+        call_pp(c.mj_euler, model, data)
 
 
-@njit(nogil=True, parallel=True)
+@cached_njit(nogil=True, parallel=True)
 def _step_kernel(
+    c,
     model,
     datas,
     ctrl_ptrs,
@@ -152,25 +119,25 @@ def _step_kernel(
     nsensor = sensors.shape[1]
     for i in prange(datas.shape[0]):
         if reset_rows[i] >= 0:  # a reset in the same parallel region saves a second launch
-            _reset_one(model, datas[i], qpos_ptrs[i], qvel_ptrs[i], qpos, qvel, reset_rows[i])
-            _copy_out(i, sources, lengths, offsets, out)
+            _reset_one(c, model, datas[i], qpos_ptrs[i], qvel_ptrs[i], qpos, qvel, reset_rows[i])
+            _copy_out(c, i, sources, lengths, offsets, out)
             if nsensor > 0:
-                _mju_copy(sensors.ctypes.data + i * nsensor * 8, sensor_ptrs[i], nsensor)
+                call_ppi(c.mju_copy, sensors.ctypes.data + i * nsensor * 8, sensor_ptrs[i], nsensor)
             continue
         if not active[i] or nstep < 1:
             continue
         data = datas[i]
-        _mju_copy(ctrl_ptrs[i], ctrl.ctypes.data + i * nu * 8, nu)
-        _first_substep(model, data, integrator)
+        call_ppi(c.mju_copy, ctrl_ptrs[i], ctrl.ctypes.data + i * nu * 8, nu)
+        _first_substep(c, model, data, integrator)
         for _ in range(nstep - 1):
-            _mj_step(model, data)
+            call_pp(c.mj_step, model, data)
         if rne:
-            _mj_rne_post_constraint(model, data)
-        _copy_out(i, sources, lengths, offsets, out)
+            call_pp(c.mj_rne_post_constraint, model, data)
+        _copy_out(c, i, sources, lengths, offsets, out)
         # the next step's position and velocity stages, and the contact sensors at this state
-        _mj_step1(model, data)
+        call_pp(c.mj_step1, model, data)
         if nsensor > 0:
-            _mju_copy(sensors.ctypes.data + i * nsensor * 8, sensor_ptrs[i], nsensor)
+            call_ppi(c.mju_copy, sensors.ctypes.data + i * nsensor * 8, sensor_ptrs[i], nsensor)
 
 
 @dataclass(frozen=True)
@@ -367,6 +334,7 @@ class MujocoBatch:
         numba.set_num_threads(self.num_threads)
         with numba.parallel_chunksize(self.chunk_size):
             _step_kernel(
+                MUJOCO_C,
                 self._model_ptr,
                 self._data_ptrs,
                 self._ctrl_ptrs,

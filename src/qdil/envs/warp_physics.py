@@ -40,11 +40,17 @@ from qdil.envs.physics import Export, export_bounds, export_slices, reset_ids
 
 def import_warp() -> tuple[Any, Any]:
     """``(warp, mujoco_warp)``, or an ImportError that says how to install them."""
+    from qdil.envs.warp_startup import cuda_driver_found, native_stderr_silenced
+
     try:
         import warp
 
         warp.config.quiet = True  # before mujoco_warp's import initialises Warp (banner)
         warp.config.log_level = warp.LOG_WARNING  # no line per kernel module loaded
+        # without a CUDA driver Warp's C library prints a "Warp CUDA warning" whatever the
+        # config; such a machine runs Warp on its CPU only, so the line is noise there
+        with native_stderr_silenced(not cuda_driver_found()):
+            warp.init()
         import mujoco_warp
     except ImportError as error:
         raise ImportError(

@@ -15,8 +15,9 @@ copies, for every run it includes, a **record** into ``<out>/runs/<run name>/``:
   objective, measures).
 
 A record is itself a run directory as :func:`qdil.evaluation.runs.load_run` reads it: a later
-``qdil report docs/reports/x/runs runs/new-seed --out docs/reports/x`` rebuilds the same
-tables from the records and adds the new run, with no checkpoint in sight.
+``qdil report docs/reports/x/runs runs/new-seed --out docs/reports/x --force`` (``--force``:
+git tracks the report's files) rebuilds the same tables from the records and adds the new
+run, with no checkpoint in sight.
 """
 
 from __future__ import annotations

@@ -14,6 +14,9 @@ Which runs go in:
   below ``qd.iterations``. Unfinished runs that have a checkpoint are still included
   (tables, tests, figures) at the iteration of their checkpoint, flagged in the tables
   (``n`` reads ``3*``) and listed in the same section.
+- A row pools the runs of one task, method label and configuration: runs of one label whose
+  recipes differ in more than the seed get rows of their own
+  (:mod:`qdil.evaluation.configurations`).
 
 Which numbers: a run's final metrics come from the corrected archive of ``qdil eval``
 (``eval.json`` and ``corrected_archive.pkl``, decision D12) when it exists and was made from
@@ -46,6 +49,7 @@ from collections.abc import Iterable, Mapping
 from pathlib import Path
 
 from qdil.evaluation import document as doc
+from qdil.evaluation.configurations import flag_duplicate_seeds, separate_configurations
 from qdil.evaluation.figures import (
     CURVE_METRICS,
     HeatmapGrid,
@@ -59,12 +63,7 @@ from qdil.evaluation.gallery import VideoSettings, make_gallery
 from qdil.evaluation.page import Report, build_document
 from qdil.evaluation.profiles import profile_records
 from qdil.evaluation.records import Record, write_record
-from qdil.evaluation.runs import (
-    RunResult,
-    collect_runs,
-    flag_duplicate_seeds,
-    group_runs,
-)
+from qdil.evaluation.runs import RunResult, collect_runs, group_runs
 from qdil.evaluation.tables import (
     TABLE_METRICS,
     format_pvalue,
@@ -131,6 +130,7 @@ def write_report(
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     runs = collect_runs(paths, labels)
+    separate_configurations(runs)  # a row pools one configuration (every key but the seed)
     groups = group_runs(runs)
     flag_duplicate_seeds(groups)
     results = tukey_tests(groups, reference)

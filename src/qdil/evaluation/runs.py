@@ -87,6 +87,9 @@ class RunResult:
         notes: remarks on an included run (unfinished, stale ``eval.json``, ...).
         deployable: final metrics of the deployable archive (empty where the run has none).
         deployable_source: where they come from.
+        config: the resolved recipe (``config.yaml``), which decides the runs pooled in a row.
+        labelled: whether ``method`` was given (``--label``) or kept by a record, not the
+            recipe's default.
     """
 
     path: Path
@@ -104,6 +107,8 @@ class RunResult:
     notes: list[str] = field(default_factory=list)
     deployable: dict[str, float] = field(default_factory=dict)
     deployable_source: str = ""
+    config: dict[str, Any] = field(default_factory=dict)
+    labelled: bool = False
 
     @property
     def included(self) -> bool:
@@ -259,6 +264,7 @@ def _final_archive(run: RunResult, label: str | None = None) -> None:
             run.problems.append(str(error))
             return
         run.method = label or record.method or run.method
+        run.labelled = bool(label or record.method)
         run.iteration, run.source, run.metrics = record.iteration, record.source, record.metrics
         run.archive = record.archive
         run.notes.extend(record.notes)
@@ -332,7 +338,7 @@ def load_run(path: Path, label: str | None = None) -> RunResult:
     except (OSError, yaml.YAMLError, KeyError, TypeError) as error:
         run.problems.append(f"{CONFIG_NAME} unreadable or without env.task ({error!r})")
         return run
-    run.method = label or method_label(config)
+    run.method, run.labelled, run.config = label or method_label(config), bool(label), config
     run.seed = config.get("seed")
     run.target = (config.get("qd") or {}).get("iterations")
     metrics_path = path / METRICS_NAME
@@ -370,18 +376,6 @@ def group_runs(runs: Iterable[RunResult]) -> Groups:
         }
         for task in tasks
     }
-
-
-def flag_duplicate_seeds(groups: Groups) -> None:
-    """Add a note to every run that shares its seed with another run of its task and method."""
-    for task, runs_by_method in groups.items():
-        for method, runs in runs_by_method.items():
-            for run in runs:
-                twins = [str(r.path) for r in runs if r is not run and r.seed == run.seed]
-                if twins:
-                    run.notes.append(
-                        f"seed {run.seed} also used by {', '.join(twins)} ({task} / {method})"
-                    )
 
 
 def collect_runs(
