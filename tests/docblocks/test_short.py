@@ -12,8 +12,15 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_a_new_fit_gets_the_tiny_overrides_last() -> None:
-    argv = ["fit", "recipes/walker_mcwae.yaml", "--qd.iterations", "60", "--seed", "1"]
+    argv = ["fit", str(ROOT / "recipes/walker_mcwae.yaml"), "--qd.iterations", "60"]
     assert shortened(argv) == [*argv, *TINY]
+
+
+def test_a_pretraining_reward_pretrains_briefly() -> None:
+    argv = ["fit", str(ROOT / "recipes/paper/walker_giril.yaml")]
+    assert shortened(argv) == [*argv, *TINY, "--reward.pretrain_epochs", "1"]
+    swapped = ["fit", str(ROOT / "recipes/walker_mcwae.yaml"), "--reward", "giril"]
+    assert shortened(swapped)[-2:] == ["--reward.pretrain_epochs", "1"]
 
 
 def test_a_resume_goes_one_iteration_further() -> None:
