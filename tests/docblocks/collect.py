@@ -110,7 +110,7 @@ class SaveAsParser:
     """``<!-- save-as: PATH -->``: the next code block is a file to save, not to run."""
 
     def __init__(self) -> None:
-        self.lexers = LexerCollection([DirectiveInHTMLCommentLexer("save-as", arguments=".+")])
+        self.lexers = LexerCollection([DirectiveInHTMLCommentLexer("save-as", arguments=r"\S+")])
 
     def __call__(self, document: Any):
         for lexed in self.lexers(document):
