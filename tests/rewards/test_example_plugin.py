@@ -170,7 +170,8 @@ def test_the_guide_runs_without_a_source_checkout() -> None:
     for block in commands:
         assert "recipes/" not in block and "docs/" not in block, block
     assert "mkdir -p my-qdil/plugins" in commands[0]
-    assert "Save this as `plugins/example_reward.py`:\n\n```python\n" in guide
+    saved = "<!-- save-as: plugins/example_reward.py -->"  # the docs test saves it there too
+    assert f"Save this as `plugins/example_reward.py`:\n\n{saved}\n```python\n" in guide
     for written in ("smoke.yaml", "walker_lsgail.yaml"):
         assert f"```yaml\n# {written}:" in guide
 

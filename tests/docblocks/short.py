@@ -1,0 +1,82 @@
+"""The docs test's one switch: ``QDIL_DOCS_SHORT=1`` shortens every ``qdil fit`` to seconds.
+
+The docs' commands train for minutes to days. Under the switch (the docs test sets it unless
+it is given as 0), the test's shell runs ``qdil`` through this file, which appends :data:`TINY`
+to every new run: one QD iteration of a handful of simulations on 50-step episodes, the
+sizes of ``recipes/smoke/``. Overrides given later win in the recipe parser, so whatever
+iterations or sizes a command sets, the run stays tiny; everything else of the command (the
+recipe, the reward model and its options, the name, the seed) runs as written, except that a
+model's offline pretraining (:data:`PRETRAINING`) is cut to one pass. A resumed run goes one
+iteration further. Commands that train nothing (``--help``, ``--print_config``,
+``--reward.help``) and the other commands (eval, report, demos, render, rewards) are
+unchanged: their cost follows the tiny run they read.
+
+Run as ``python short.py ARGS...`` it is the ``qdil`` command with that rewriting.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+
+# recipes/smoke/walker_true.yaml's sizes (num_envs divisible by k + 1 for k = 1 and 2 feet),
+# ten cells per measure, and one demonstration episode for the reward model's update
+TINY = [
+    "--qd.iterations", "1",
+    "--env.num_envs", "6",
+    "--env.max_episode_steps", "50",
+    "--rl.init_args.rollout_length", "16",
+    "--rl.init_args.jacobian_iterations", "2",
+    "--rl.init_args.walk_iterations", "2",
+    "--rl.init_args.num_minibatches", "2",
+    "--rl.init_args.update_epochs", "2",
+    "--qd.cells", "10",
+    "--qd.branch_episodes", "1",
+    "--qd.mean_episodes", "2",
+    "--qd.emitter.init_args.batch_size", "4",
+    "--demos.num_episodes", "1",
+    "--logging.progress", "false",
+]  # fmt: skip
+ONE_MORE = ["--qd.iterations", "2"]  # a resumed tiny run: one iteration past its first
+NOTHING_RUNS = {"-h", "--help", "--print_config", "--reward.help"}
+# reward options that train offline before the first iteration (GIRIL's VAE: 10,000 passes
+# over the demonstrations in the paper's recipes), shortened where the model has them
+PRETRAINING = {"pretrain_epochs": "1"}
+
+
+def enabled() -> bool:
+    """Whether the switch is on: ``QDIL_DOCS_SHORT`` set to anything but empty or 0."""
+    return os.environ.get("QDIL_DOCS_SHORT", "") not in ("", "0")
+
+
+def pretraining(fit_argv: list[str]) -> list[str]:
+    """Overrides of :data:`PRETRAINING` for the options the fit's reward model has."""
+    from qdil.cli import parse_fit
+
+    try:
+        config, _, _ = parse_fit(fit_argv)
+    except (SystemExit, Exception):  # a bad command: qdil itself says what is wrong
+        return []
+    options = getattr(config.reward, "init_args", None) or {}  # true_reward has none
+    return [
+        arg
+        for key, value in PRETRAINING.items()
+        if key in options
+        for arg in (f"--reward.{key}", value)
+    ]
+
+
+def shortened(argv: list[str]) -> list[str]:
+    """The ``qdil`` arguments ``argv`` with a tiny run's overrides appended to a fit."""
+    if not argv or argv[0] != "fit" or NOTHING_RUNS.intersection(argv):
+        return argv
+    if "--resume" in argv:  # a resumed run does not pretrain again
+        return [*argv, *ONE_MORE]
+    tiny = [*argv, *TINY]
+    return [*tiny, *pretraining(tiny[1:])]
+
+
+if __name__ == "__main__":
+    from qdil.cli import main
+
+    main(shortened(sys.argv[1:]) if enabled() else sys.argv[1:])
