@@ -171,6 +171,9 @@ class LoggingConfig:
             ``online``, or ``disabled``.
         wandb_project: W&B project.
         heatmap_every: log an archive heatmap every K iterations (0: never).
+        videos: at the end of the run, render this many elites of the deployable archive,
+            spread over the measure space, and log their gaits to W&B (0: none; W&B only;
+            without headless OpenGL one line says so and the run ends as usual).
     """
 
     root: str = "runs"
@@ -180,3 +183,4 @@ class LoggingConfig:
     wandb: Literal["offline", "online", "disabled"] = "offline"
     wandb_project: str = "qdil"
     heatmap_every: int = 25
+    videos: int = 4

@@ -18,6 +18,7 @@ import csv
 import math
 import os
 import secrets
+import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
 
@@ -253,12 +254,42 @@ class Tracker:
                 self.wandb.log_image("archive/heatmap", [figure], step=iteration)
 
     def finish(self, run: TrackedRun) -> None:
-        """Log the final archive as a table and close W&B."""
+        """Log the final archive as a table, and its elites' gaits as videos; close W&B."""
         if self.wandb is None:
             return
         data = run.archives.true.data(["objective", "measures", "index"], return_type="pandas")
         self.wandb.log_table("archive/elites", dataframe=data, step=run.state.iteration)
+        if self.logging.videos > 0:
+            self._log_videos(run.state.iteration)
         self.wandb.finalize("success")
         import wandb
 
         wandb.finish()
+
+    def _log_videos(self, iteration: int) -> None:
+        """Render elites of the deployable archive (last checkpoint) and log them to W&B.
+
+        The files stay in ``RUN_DIR/videos/wandb``; ``qdil render`` makes others on demand.
+        """
+        from qdil.evaluation.gl import GLUnavailableError
+        from qdil.evaluation.video import render_elites
+
+        out = self.run_dir / "videos" / "wandb"
+        try:
+            videos = render_elites(self.run_dir, out, which="deployable", top=self.logging.videos)
+        except (GLUnavailableError, ValueError) as error:  # no GL here, or no elite yet
+            first = str(error).splitlines()[0]
+            print(f"W&B videos skipped (logging.videos=0 turns them off): {first}", file=sys.stderr)
+            return
+        captions = [
+            f"cell {list(v.cell)}: true return {v.episode_return:.0f}, measures "
+            f"{[round(float(m), 2) for m in v.measures]}"
+            for v in videos
+        ]
+        self.wandb.log_video(
+            "archive/videos",
+            [str(v.path) for v in videos],
+            step=iteration,
+            caption=captions,
+            format=[v.path.suffix[1:] for v in videos],
+        )

@@ -105,6 +105,21 @@ def test_offline_wandb_run_holds_the_metrics_and_a_resume_continues_it(tmp_path:
     assert tables
     table = json.loads(tables[0].read_text())
     assert "objective" in table["columns"] and len(table["data"]) >= 1
+    # the elites' gaits: 4 videos of the deployable archive at the last step, where GL renders
+    from qdil.evaluation.gl import GLUnavailableError, use_gl_backend
+
+    try:
+        use_gl_backend()
+    except GLUnavailableError:
+        assert "W&B videos skipped" in done.stderr, done.stderr[-3000:]
+    else:
+        videos = list((folders[0] / "files" / "media" / "videos").rglob("*.mp4"))
+        assert len(videos) == 4 and all(p.stat().st_size > 1000 for p in videos), videos
+        logged = [row for row in rows if "archive/videos/count" in row]
+        assert [(row["trainer/global_step"], row["archive/videos/count"]) for row in logged] == [
+            (3, 4)
+        ]
+        assert len(list((tmp_path / "runs" / "wb" / "videos" / "wandb").glob("*.mp4"))) == 4
     csv_rows = (tmp_path / "runs" / "wb" / "metrics.csv").read_text().strip().splitlines()
     assert len(csv_rows) == 4  # CSV logging always happens
 
