@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
+from typing import Any
 
 os.environ.setdefault("WANDB_MODE", "disabled")
 # one physics thread per test process: tests check results, not speed, and several
@@ -35,6 +37,21 @@ torch.set_num_threads(1)
 def one_torch_thread() -> None:
     """Every test starts with one torch thread (in-process workers set their own)."""
     torch.set_num_threads(1)
+
+
+def _at_threads(threads: int, fn: Callable[[], Any]) -> Any:
+    before = torch.get_num_threads()
+    torch.set_num_threads(threads)
+    try:
+        return fn()
+    finally:
+        torch.set_num_threads(before)
+
+
+@pytest.fixture
+def at_threads() -> Callable[[int, Callable[[], Any]], Any]:
+    """``at_threads(n, fn)``: ``fn()`` computed with n torch threads (the count restored)."""
+    return _at_threads
 
 
 @pytest.fixture

@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import itertools
 
+import numpy as np
 import pytest
 import torch
-from executor_helpers import InProcessExecutor, run_phases, same_outputs
+from executor_helpers import InProcessExecutor, make_vppo, run_phases, same_outputs
 
 from qdil.executors.shards import MIN_ROWS, shard_bounds
+from qdil.rl.normalize import RunningMeanStd
 
 
 @pytest.mark.parametrize("workers", [1, 2, 3, 5])
@@ -29,6 +31,19 @@ def test_a_local_run_repeated_in_one_process_gives_the_same_bits(local_outputs) 
     finally:
         torch.set_num_threads(threads)
     assert kept and same_outputs(local_outputs, again)
+
+
+def test_the_walk_gives_the_same_bits_with_one_and_two_threads(at_threads) -> None:
+    """Noise seed 4 made the walk's critic clip its 256 x 256 layer differently on 2 threads."""
+
+    def walk() -> list:
+        algo = make_vppo(None)
+        algo.generator.manual_seed(4)
+        theta, stats = algo.initial_solution(0), RunningMeanStd(1, (17,))
+        phase = algo.walk(theta, stats, np.array([1.0, 0.5, -0.5]), lambda r: r.rewards, 2)
+        return [phase.solutions, phase.stats.mean, phase.stats.var, phase.diagnostics]
+
+    assert same_outputs(at_threads(1, walk), at_threads(2, walk))
 
 
 @pytest.mark.parametrize(("num_envs", "workers"), [(6, 2), (6, 7), (3, 2)])

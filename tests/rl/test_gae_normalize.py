@@ -69,3 +69,16 @@ def test_fresh_statistics_start_at_zero_mean_unit_variance() -> None:
     assert stats.mean.dtype == torch.float64
     np.testing.assert_array_equal(stats.mean.numpy(), 0.0)
     np.testing.assert_array_equal(stats.var.numpy(), 1.0)
+
+
+def test_one_policys_statistics_are_the_same_with_one_and_two_threads(at_threads) -> None:
+    """The walk's value targets: one mean and one variance over every step of the rollout."""
+    x = torch.randn(1, 40000, dtype=torch.float64, generator=torch.Generator().manual_seed(0))
+
+    def updated() -> RunningMeanStd:
+        stats = RunningMeanStd(1)
+        stats.update(x * 3 + 1)
+        return stats
+
+    one, two = at_threads(1, updated), at_threads(2, updated)
+    assert torch.equal(one.mean, two.mean) and torch.equal(one.var, two.var)

@@ -1,5 +1,7 @@
 from __future__ import annotations
 
+from functools import partial
+
 import numpy as np
 import pytest
 import torch
@@ -73,3 +75,37 @@ def test_per_policy_gradient_clipping_leaves_small_gradients_alone() -> None:
     assert norms[0] > 1 and abs(float(after) - 1.0) < 1e-4
     for b, p in zip(before, critic.parameters(), strict=True):
         torch.testing.assert_close(p.grad[1], b)
+
+
+def test_per_model_gradient_clipping_is_the_same_with_one_and_two_threads(at_threads) -> None:
+    """One critic's 256 x 256 layer sums 65,536 squares into its norm: once split by thread."""
+
+    critic = VectorizedCritic(1, 17)
+
+    def clipped(seed: int) -> list[torch.Tensor]:
+        g = torch.Generator().manual_seed(seed)
+        for p in critic.parameters():
+            p.grad = torch.randn(p.shape, generator=g)
+        norms = critic.clip_grad_norm_per_model(1.0)
+        return [norms, *(p.grad.clone() for p in critic.parameters())]
+
+    for seed in range(10):  # seed 6's norm differed in the last bit before
+        one, two = (at_threads(n, partial(clipped, seed)) for n in (1, 2))
+        assert all(torch.equal(a, b) for a, b in zip(one, two, strict=True)), seed
+
+
+def test_a_lone_bias_gradient_is_the_same_with_one_and_two_threads(at_threads) -> None:
+    """One critic's one-output head sums its bias gradient over every row of a batch."""
+    critic = VectorizedCritic(1, 17, hidden=(8, 8))
+    obs = torch.randn(1, 40000, 17, generator=torch.Generator().manual_seed(0))
+
+    def gradients() -> list[torch.Tensor]:
+        critic.zero_grad()
+        critic(obs).square().mean().backward()
+        return [p.grad.clone() for p in critic.parameters()]
+
+    one, two = at_threads(1, gradients), at_threads(2, gradients)
+    assert all(torch.equal(a, b) for a, b in zip(one, two, strict=True))
+    with torch.no_grad():  # the plain broadcast, as in every forward pass without gradients
+        plain = critic(obs)
+    assert torch.equal(critic(obs).detach(), plain)

@@ -34,6 +34,7 @@ import torch
 from qdil.data import Rollout, TransitionBatch
 from qdil.qd.archives import QD_OFFSETS, qd_metrics
 from qdil.qd.checkpoint import save_checkpoint
+from qdil.reductions import sum_over
 from qdil.rl.episodes import Evaluation
 from qdil.rl.normalize import RunningMeanStd
 
@@ -93,7 +94,7 @@ class TrainReward:
         rewards = self.run.reward.predict_reward(rollout, update=True)
         self.run.reward.check_finite(rewards, "rewards", self.run.state.iteration)
         valid = rollout.valid > 0
-        self.total += float(rewards[valid].sum())
+        self.total += float(sum_over(rewards[valid], 0))  # thread-invariant over 384,000 steps
         self.steps += int(valid.sum())
         return rewards
 

@@ -18,6 +18,7 @@ from typing_extensions import override
 
 from qdil.data import Rollout, TransitionBatch
 from qdil.demos.dataset import DemoSet
+from qdil.reductions import sum_over
 from qdil.rewards.base import RewardModel
 
 
@@ -99,9 +100,10 @@ class BonusWrapper(RewardModel):
         bonus = self.added(rollout, update)
         if update:  # the balance a user watches: learned reward and bonus per training step
             valid = rollout.valid > 0
-            added = float(bonus[valid].sum()) if bonus is not None else 0.0
+            # a paper rollout has 384,000 steps: sum_over keeps the sums thread-invariant
+            added = float(sum_over(bonus[valid], 0)) if bonus is not None else 0.0
             self._balance += torch.tensor(
-                [float(base[valid].sum()), added, float(valid.sum())], dtype=torch.float64
+                [float(sum_over(base[valid], 0)), added, float(valid.sum())], dtype=torch.float64
             )
         return base if bonus is None else base + bonus
 

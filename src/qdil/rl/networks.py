@@ -17,6 +17,8 @@ import numpy as np
 import torch
 from torch import nn
 
+from qdil.reductions import GRAIN_SIZE, sum_over
+
 
 def _layer_shapes(sizes: Sequence[int]) -> list[tuple[int, int]]:
     return [(sizes[i + 1], sizes[i]) for i in range(len(sizes) - 1)]
@@ -31,6 +33,34 @@ def _orthogonal(out_dim: int, in_dim: int, gain: float, generator: torch.Generat
     if rows < cols:
         q = q.T
     return (gain * q[:rows, :cols]).to(torch.float32)
+
+
+class _RowBias(torch.autograd.Function):
+    """A (P, 1, out) bias broadcast to (P, B, out), its gradient summed by :func:`sum_over`.
+
+    Autograd sums a broadcast bias's gradient over the B rows; with one policy and one output
+    (the walk's critic head) that sum has a single output, split between threads from
+    :data:`GRAIN_SIZE` rows on (a paper minibatch has 48,000), so its rounding would follow
+    the thread count. :func:`sum_over` gives it the one-thread bits.
+    """
+
+    @staticmethod
+    def forward(ctx, bias: torch.Tensor, rows: int) -> torch.Tensor:
+        return bias.expand(bias.shape[0], rows, bias.shape[2])
+
+    @staticmethod
+    def backward(ctx, grad: torch.Tensor) -> tuple[torch.Tensor, None]:
+        return sum_over(grad, 1, keepdim=True), None
+
+
+def _lone_bias_grad(bias: torch.Tensor, rows: int) -> bool:
+    """Whether autograd would sum ``bias``'s gradient into one element split between threads."""
+    return (
+        bias.numel() == 1
+        and rows >= GRAIN_SIZE
+        and bias.requires_grad
+        and bias.device.type == "cpu"
+    )
 
 
 class _StackedMLP(nn.Module):
@@ -72,7 +102,10 @@ class _StackedMLP(nn.Module):
         """
         layers = self.operands() if operands is None else operands
         last = len(layers) - 1
+        grad = torch.is_grad_enabled()  # once: rollouts call this every step, without gradients
         for i, (bias, weight_t) in enumerate(layers):
+            if grad and _lone_bias_grad(bias, x.shape[1]):
+                bias = _RowBias.apply(bias, x.shape[1])  # same forward; one-thread bits backward
             x = torch.baddbmm(bias, x, weight_t)
             if i < last:
                 x = torch.tanh(x)
@@ -94,7 +127,9 @@ class _StackedMLP(nn.Module):
         grads = [p.grad for p in self.parameters() if p.grad is not None]
         if not grads:
             return torch.zeros(self.num_models, device=self.weights[0].device)
-        norms = torch.sqrt(sum(g.reshape(g.shape[0], -1).square().sum(1) for g in grads))
+        # one model's squared norm of a 256 x 256 layer sums 65,536 numbers into one: the sum
+        # whose split between threads would change the clipping's last bits
+        norms = torch.sqrt(sum(sum_over(g.reshape(g.shape[0], -1).square(), 1) for g in grads))
         scale = (max_norm / (norms + 1e-6)).clamp(max=1.0)
         for g in grads:
             g.mul_(scale.reshape(-1, *([1] * (g.dim() - 1))))

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import torch
 
+from qdil.reductions import mean_over, var_over
+
 
 class RunningMeanStd:
     """Per-policy running statistics of vectors, merged with Chan et al.'s parallel update.
@@ -63,8 +65,10 @@ class RunningMeanStd:
             x: (P, B, *shape) samples; policy i's statistics absorb ``x[i]``.
         """
         x = x.detach().to(torch.float64)
-        batch_mean = x.mean(dim=1)
-        batch_var = x.var(dim=1, unbiased=False)
+        # one policy's scalar statistics (the walk's value targets: 384,000 at paper scale)
+        # reduce to one number each, which torch would split between threads
+        batch_mean = mean_over(x, 1)
+        batch_var = var_over(x, 1, correction=0)
         batch_count = torch.full_like(self.count, x.shape[1])
         delta = batch_mean - self.mean
         total = self.count + batch_count

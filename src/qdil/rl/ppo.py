@@ -14,6 +14,7 @@ import numpy as np
 import torch
 
 from qdil.data import Rollout
+from qdil.reductions import mean_over, std_over, var_over
 from qdil.rl.collect import PolicyData
 from qdil.rl.gae import compute_gae
 from qdil.rl.networks import VectorizedActor, VectorizedCritic
@@ -178,23 +179,28 @@ def ppo_update(
             new_log_probs = dist.log_prob(actions[:, idx]).sum(-1)
             log_ratio = new_log_probs - old_log_probs[:, idx]
             ratio = log_ratio.exp()
+            # the means over a minibatch go through mean_over: with one policy (the walk) a
+            # paper minibatch (48,000 rows) reduces to one number, split between threads
             with torch.no_grad():
-                approx_kl = ((ratio - 1) - log_ratio).mean(1)
-                clipfrac = ((ratio - 1).abs() > settings.clip_coef).float().mean(1)
+                approx_kl = mean_over((ratio - 1) - log_ratio, 1)
+                clipfrac = mean_over(((ratio - 1).abs() > settings.clip_coef).float(), 1)
             adv = advantages[:, idx]
-            adv = (adv - adv.mean(1, keepdim=True)) / (adv.std(1, keepdim=True) + 1e-8)
-            pg_loss = torch.max(
+            adv = (adv - mean_over(adv, 1, keepdim=True)) / (std_over(adv, 1, keepdim=True) + 1e-8)
+            pg_rows = torch.max(
                 -adv * ratio, -adv * ratio.clamp(1 - settings.clip_coef, 1 + settings.clip_coef)
-            ).mean(1)
+            )
             new_values = critic(obs[:, idx])
-            v_loss = (new_values - returns[:, idx]).square()
+            v_rows = (new_values - returns[:, idx]).square()
             if settings.value_clip is not None:
                 clipped = values[:, idx] + (new_values - values[:, idx]).clamp(
                     -settings.value_clip, settings.value_clip
                 )
-                v_loss = torch.max(v_loss, (clipped - returns[:, idx]).square())
-            v_loss = 0.5 * v_loss.mean(1)
-            entropy = dist.entropy().sum(-1).mean(1)
+                v_rows = torch.max(v_rows, (clipped - returns[:, idx]).square())
+            entropy_rows = dist.entropy().sum(-1)
+            # the losses' gradients (1/B per row) do not depend on how their means round, so
+            # the loss keeps torch's means and the diagnostics below take mean_over's
+            pg_loss, v_loss = pg_rows.mean(1), 0.5 * v_rows.mean(1)
+            entropy = entropy_rows.mean(1)
             # a sum over policies keeps their gradients independent
             loss = (pg_loss - settings.ent_coef * entropy + settings.vf_coef * v_loss).sum()
             actor_opt.zero_grad()
@@ -204,19 +210,23 @@ def ppo_update(
             critic.clip_grad_norm_per_model(settings.max_grad_norm)
             actor_opt.step()
             critic_opt.step()
-            step_stats = {
-                "policy_loss": pg_loss,
-                "value_loss": v_loss,
-                "entropy": entropy,
-                "approx_kl": approx_kl,
-                "clipfrac": clipfrac,
-            }
+            with torch.no_grad():
+                step_stats = {
+                    "policy_loss": mean_over(pg_rows, 1),
+                    "value_loss": 0.5 * mean_over(v_rows, 1),
+                    "entropy": mean_over(entropy_rows, 1),
+                    "approx_kl": approx_kl,
+                    "clipfrac": clipfrac,
+                }
             for key, value in step_stats.items():
                 stats[key].append(float(value.detach().mean()))
         if settings.target_kl is not None and float(approx_kl.mean()) > settings.target_kl:
             break
     with torch.no_grad():
-        explained = 1 - (returns - values).var() / (returns.var() + 1e-8)
+        # over every sample of every policy: one output from 384,000 numbers at paper scale
+        explained = 1 - var_over((returns - values).reshape(-1), 0) / (
+            var_over(returns.reshape(-1), 0) + 1e-8
+        )
     out = {key: float(np.mean(values_)) for key, values_ in stats.items()}
     out.update(explained_variance=float(explained), epochs=float(epochs))
     return out

@@ -39,6 +39,7 @@ import torch.nn.functional as F
 from typing_extensions import override
 
 from qdil.data import TransitionBatch
+from qdil.reductions import mean_over, std_over
 from qdil.rewards.adversarial import AdversarialReward, average
 from qdil.rewards.nets import gail_reward, gradient_penalty, mlp
 from qdil.rewards.registry import register_reward
@@ -215,15 +216,16 @@ class WAEReward(AdversarialReward):
         if len(policy) > self.calibration_samples:
             policy = policy[torch.randperm(len(policy))[: self.calibration_samples]]
         scores = self.score(expert), self.score(policy)
-        means = [float(s.mean()) for s in scores]
+        # every expert transition: from 32,768 of them torch's mean would split by thread
+        means = [float(mean_over(s, 0)) for s in scores]
         self.critic_means.copy_(torch.tensor(means, dtype=torch.float64))
         if len(scores[1]) > 1:
-            self.critic_policy_std.fill_(float(scores[1].std()))
+            self.critic_policy_std.fill_(float(std_over(scores[1], 0)))
         metrics = {"critic_expert": means[0], "critic_policy": means[1]}
         # the spread within each side, against the gap: how much the reward can tell policy
         # transitions apart once ``calibrated`` divides by the gap
         metrics["critic_expert_std"], metrics["critic_policy_std"] = (
-            float(s.std()) if len(s) > 1 else 0.0 for s in scores
+            float(std_over(s, 0)) if len(s) > 1 else 0.0 for s in scores
         )
         if self.reward_type in ("calibrated", "standardized"):  # the same scores, no 2nd pass
             metrics["reward_expert"] = float(self.transform(scores[0]).mean())
