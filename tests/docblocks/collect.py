@@ -160,8 +160,13 @@ def skip_at_the_block(item: pytest.Item, report: pytest.TestReport) -> None:
         report.longrepr = (str(item.path), item.reportinfo()[1], report.longrepr[2])
 
 
+BLOCK_TIMEOUT = 2400
+"""Seconds one block may take: a block that loops over methods and seeds trains tens of runs."""
+
+
 def mark_docs(items: list[pytest.Item]) -> None:
     """Mark every docs block ``docs``, so that the default run leaves them out."""
     for item in items:
         if item.path.suffix == ".md":
             item.add_marker(pytest.mark.docs)
+            item.add_marker(pytest.mark.timeout(BLOCK_TIMEOUT))

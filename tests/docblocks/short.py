@@ -20,7 +20,8 @@ import os
 import sys
 
 # recipes/smoke/walker_true.yaml's sizes (num_envs divisible by k + 1 for k = 1 and 2 feet),
-# ten cells per measure, and one demonstration episode for the reward model's update
+# ten cells per measure, one demonstration episode for the reward model's update, and no
+# W&B videos at the end (tests/tracking/test_wandb.py covers them)
 TINY = [
     "--qd.iterations", "1",
     "--env.num_envs", "6",
@@ -36,6 +37,7 @@ TINY = [
     "--qd.emitter.init_args.batch_size", "4",
     "--demos.num_episodes", "1",
     "--logging.progress", "false",
+    "--logging.videos", "0",
 ]  # fmt: skip
 ONE_MORE = ["--qd.iterations", "2"]  # a resumed tiny run: one iteration past its first
 NOTHING_RUNS = {"-h", "--help", "--print_config", "--reward.help"}
