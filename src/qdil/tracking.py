@@ -18,7 +18,6 @@ import csv
 import math
 import os
 import secrets
-import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
 
@@ -254,32 +253,29 @@ class Tracker:
                 self.wandb.log_image("archive/heatmap", [figure], step=iteration)
 
     def finish(self, run: TrackedRun) -> None:
-        """Log the final archive as a table, and its elites' gaits as videos; close W&B."""
+        """Log the final archive as a table and close W&B."""
         if self.wandb is None:
             return
         data = run.archives.true.data(["objective", "measures", "index"], return_type="pandas")
         self.wandb.log_table("archive/elites", dataframe=data, step=run.state.iteration)
-        if self.logging.videos > 0:
-            self._log_videos(run.state.iteration)
         self.wandb.finalize("success")
         import wandb
 
         wandb.finish()
 
-    def _log_videos(self, iteration: int) -> None:
-        """Render elites of the deployable archive (last checkpoint) and log them to W&B.
+    @property
+    def wants_videos(self) -> bool:
+        """Whether the run ends with videos of its elites in W&B (``logging.videos``)."""
+        return self.wandb is not None and self.logging.videos > 0
 
-        The files stay in ``RUN_DIR/videos/wandb``; ``qdil render`` makes others on demand.
+    def log_videos(self, videos: list[Any], iteration: int) -> None:
+        """Log rendered elites as ``archive/videos``, captioned with cell, return and measures.
+
+        Args:
+            videos: :class:`qdil.evaluation.video.Video` records of the files to log.
+            iteration: the QD iteration they show.
         """
-        from qdil.evaluation.gl import GLUnavailableError
-        from qdil.evaluation.video import render_elites
-
-        out = self.run_dir / "videos" / "wandb"
-        try:
-            videos = render_elites(self.run_dir, out, which="deployable", top=self.logging.videos)
-        except (GLUnavailableError, ValueError) as error:  # no GL here, or no elite yet
-            first = str(error).splitlines()[0]
-            print(f"W&B videos skipped (logging.videos=0 turns them off): {first}", file=sys.stderr)
+        if self.wandb is None or not videos:
             return
         captions = [
             f"cell {list(v.cell)}: true return {v.episode_return:.0f}, measures "

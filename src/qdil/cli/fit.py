@@ -296,6 +296,10 @@ def fit(argv: list[str]) -> None:
         ) from None
     finally:
         run.vppo.executor.close()
+    if run.tracker.wants_videos:
+        run.tracker.log_videos(
+            _render_for_wandb(run_dir, run.tracker.logging.videos), run.state.iteration
+        )
     run.tracker.finish(run)
     print(f"run directory: {run_dir}", file=sys.stderr)
 
@@ -344,3 +348,19 @@ def build(init: Namespace, name: str, run_dir: Path, resolved: str, *, resume: b
         resume=resume,
         executor=init.executor,
     )
+
+
+def _render_for_wandb(run_dir: Path, count: int) -> list:
+    """``count`` elites of the deployable archive, spread over the measures, as videos.
+
+    They stay in ``RUN_DIR/videos/wandb``; without GL (or elites) one line says why, and none.
+    """
+    from qdil.evaluation.gl import GLUnavailableError
+    from qdil.evaluation.video import render_elites
+
+    try:
+        return render_elites(run_dir, run_dir / "videos" / "wandb", which="deployable", top=count)
+    except (GLUnavailableError, ValueError) as error:  # no GL here, or no elite yet
+        first = str(error).splitlines()[0]
+        print(f"W&B videos skipped (logging.videos=0 turns them off): {first}", file=sys.stderr)
+        return []
