@@ -9,18 +9,23 @@ Every default lives in a signature here or in the chosen class, so it is documen
 
 from __future__ import annotations
 
+import typing
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 from ribs.archives import ArchiveBase
 from ribs.emitters import EmitterBase
 from ribs.schedulers import Scheduler
 
-from qdil.rewards.base import RewardModel
+if TYPE_CHECKING:
+    from qdil.rewards.base import RewardModel
 
-RewardFactory = Callable[[int, int, int], RewardModel]
+# "RewardModel" is a forward reference: the recipe sections sit below the reward models and do
+# not import them; jsonargparse resolves it in qdil.recipe, which does. typing's Callable, since
+# Python 3.11's collections.abc.Callable flattens its argument list when resolving one.
+RewardFactory = typing.Callable[[int, int, int], "RewardModel"]
 """A reward model class with its hyperparameters; qdil passes obs_dim, action_dim, k."""
 
 EmitterFactory = Callable[[ArchiveBase, np.ndarray], EmitterBase]

@@ -1,19 +1,9 @@
 """Sums, means and variances whose bits do not depend on torch's CPU thread count.
 
-ATen reduces a tensor to a *single* element by cutting the inputs into one range per thread
-once there are at least :data:`GRAIN_SIZE` of them, and adding the ranges' partial results:
-the rounding then depends on the thread count, which changes inside a qdil process (numba's
-OpenMP pool, a Ray worker; see docs/concepts/reproducibility.md). A reduction with two or
-more outputs is cut between outputs instead, so each output is reduced by one thread in one
-pass, the same pass a single output gets with one thread.
-
-The functions here give a single output exactly the bits torch computes for it with one
-thread, whatever the thread count: a sum or mean is taken as one row of a two-row reduction
-(the second row is the same memory, a stride-0 view), and a variance replays torch's
-one-thread full-reduction variance (the mean, then a sequential float64 sum of squared
-deviations). Any other reduction, every reduction under :data:`GRAIN_SIZE` inputs, and every
-one off the CPU is torch's own call, unchanged. ``tests/test_reductions.py`` checks both
-claims against torch for the shapes qdil reduces.
+:func:`sum_over`, :func:`mean_over`, :func:`var_over` and :func:`std_over` give a reduction to
+a single number over :data:`GRAIN_SIZE` or more CPU inputs the bits torch computes with one
+thread; every other reduction is torch's own call. Why and how:
+docs/concepts/reproducibility.md (section "torch's own reductions").
 """
 
 from __future__ import annotations

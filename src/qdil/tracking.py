@@ -1,15 +1,8 @@
 """Metrics of a run: ``metrics.csv`` always, W&B through Lightning's logger, a progress bar.
 
-Metric names (one row per QD iteration, keyed by ``iteration``):
-
-- ``qd/*``: the true-return archive (``qd_score``, ``qd_score_offset``, ``coverage``,
-  ``obj_max``, ``obj_mean``, ``num_elites``); the numbers reports use.
-- ``qd_learned/*``: the same on the learned-return archive (imitation runs only).
-- ``search/*``: the search policy θ_μ (objective, true objective, measures).
-- ``emitter/*``: restarts, branches that improved the archive, coefficient mean.
-- ``rl/*``: PPO diagnostics of the Jacobian and walk phases, training episode returns.
-- ``reward/*``: whatever the reward model's ``update`` returns.
-- ``perf/*``: env steps, env-steps/s, seconds per iteration and per phase.
+:class:`Tracker` writes every QD iteration's metrics to :class:`MetricsCSV` and, if enabled,
+to W&B; :class:`Progress` is the bar. Every metric name: docs/concepts/metrics.md; W&B:
+docs/guides/wandb.md.
 """
 
 from __future__ import annotations

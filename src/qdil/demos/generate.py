@@ -1,14 +1,8 @@
 """Demonstrations from an expert archive, as the paper makes them.
 
-1. Rank the elites of a run's true-return archive by objective and keep the top ``top``.
-2. Pick ``num`` of them as diverse as possible: farthest-point sampling in measure space,
-   starting from the best elite.
-3. Play one deterministic episode (mean actions) per chosen elite, normalising
-   observations with the elite's own stored statistics, and record aligned
-   (s_t, a_t, δ(s_t), r_t) with the full MuJoCo state.
-
-The episodes' returns differ from the archive's objectives, which average stochastic
-episodes; the provenance keeps both.
+:func:`demos_from_run` picks diverse elites among the best of a run's true-return archive
+(:func:`select_elites`) and plays one deterministic episode of each (:func:`record_episodes`).
+The steps, and why the returns differ from the archive's: docs/concepts/demonstrations.md.
 """
 
 from __future__ import annotations

@@ -1,26 +1,8 @@
 """The qdil demonstration file: a versioned ``.npz`` readable without qdil.
 
-Layout (format ``qdil-demos``, version 1)::
-
-    header          0-d string array: JSON with format, version, task, sizes, feet,
-                    provenance and one summary per episode
-    obs             (T, obs_dim) float64   raw observations s_t
-    actions         (T, action_dim) float32 executed actions a_t
-    contacts        (T, k) uint8           foot-contact flags δ(s_t)
-    rewards         (T,) float32           true rewards r_t (NaN when unknown)
-    episode_ends    (E,) int64             one past each episode's last step; last = T
-    terminated      (E,) bool              the episode ended by termination
-    final_obs       (E, obs_dim) float64   s_T of each episode (after its last step)
-    final_contacts  (E, k) uint8           δ(s_T)
-    qpos, qvel      (T, nq), (T, nv) float64  full MuJoCo states of s_t (optional)
-
-Read it with numpy alone::
-
-    data = np.load("walker2d.npz")
-    header = json.loads(str(data["header"]))
-
-Steps are aligned: a_t is the action taken in s_t, δ(s_t) describes s_t (decision D4). The
-next observation of step t is ``obs[t + 1]`` inside an episode and ``final_obs`` at its end.
+:func:`save_demos` writes one (format ``qdil-demos``, version 1); :func:`load_demos` reads it
+and validates it against its task; :func:`resolve_path` also finds the sets shipped with
+qdil (:func:`shipped_demos`). Layout and step alignment: docs/concepts/demonstrations.md.
 """
 
 from __future__ import annotations

@@ -1,20 +1,8 @@
 """Which runs a report pools: one row per method label and effective configuration.
 
-A row's mean ± std is over seeds of one experiment, so the runs it pools must share their
-effective configuration, every recipe key except those that do not change what a run
-computes (:data:`NOT_COMPARED`: the seed, the name, where and how it logs and on which
-executor and physics threads it ran). A smoke run, a shortened run and the real run of
-one method used to be pooled because they share a label; now:
-
-- runs of one task and label that differ are **separated**: each configuration gets a row
-  of its own, labelled with the keys that set it apart (``GAIL [qd.iterations=2]`` beside
-  ``GAIL [qd.iterations=120]``), and every such run carries a note naming all the keys;
-- a run whose label is only the recipe's default (no ``--label``, no record) **joins** the
-  label of the labelled runs (``--label`` or a kept record) of its configuration, so a seed
-  trained later goes into the row of the seeds a report keeps under a custom label.
-
-Keys a config lacks because it was written by an older qdil compare at the value those runs
-used (:data:`qdil.qd.checkpoint.IMPLICIT_KEYS`), as on resume.
+:func:`separate_configurations` gives runs of one label that differ in a compared recipe key
+(any but :data:`NOT_COMPARED`) rows of their own, and lets a run with the default label join
+the label of its configuration's labelled runs. Why: docs/guides/reproduce-paper-results.md.
 """
 
 from __future__ import annotations

@@ -1,16 +1,9 @@
 """Videos for the report page: a few elites of every run, spread over its archive.
 
-For every included run, ``count`` elites are chosen as ``qdil render --top`` chooses them
-(farthest-point sampling in measure space, from the best elite) in the archive the report's
-heatmap shows: the corrected archive of ``qdil eval`` where the report used it, else the
-checkpoint's true-keyed archive. Each plays one deterministic episode, replayed and drawn by
-:func:`qdil.evaluation.video.render_rows` (the path of ``qdil render``), into
-``OUT/videos/<heatmap name>/cell_I_J.mp4``. MP4 (H.264) plays in the browsers we tried,
-headless Chromium included.
-
-Nothing is rendered where no OpenGL backend works or ``count`` is 0: :attr:`Gallery.reason`
-says why, and the page says it too. A record kept by an earlier report holds no policies,
-so its run gets no videos (:attr:`Gallery.notes`).
+:func:`make_gallery` renders them as ``qdil render --top`` does, from the archive the
+report's heatmap shows (:func:`policy_archive`); :attr:`Gallery.reason` and
+:attr:`Gallery.notes` say why the page or a run has none. Which elites, the replay, the cost:
+docs/guides/videos.md (section "The report page").
 """
 
 from __future__ import annotations

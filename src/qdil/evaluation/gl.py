@@ -1,13 +1,8 @@
 """Headless OpenGL for MuJoCo's renderer: EGL, else OSMesa, chosen by trying each.
 
-MuJoCo picks its OpenGL backend from ``MUJOCO_GL`` when ``mujoco`` is imported, and PyOpenGL
-its platform from ``PYOPENGL_PLATFORM`` when it loads. Where ``MUJOCO_GL`` is unset,
-:func:`use_gl_backend` draws one small frame with ``egl``, then ``osmesa``, each in a child
-process (a backend whose libraries are missing can abort a process), and sets both variables
-to the first that works. Only the standard library is imported here, so that a program can
-choose the backend before ``mujoco`` loads; where ``mujoco`` is loaded already (``qdil
-render`` after its checks, a notebook, a test session), the renderer's context class is
-pointed at the chosen backend instead.
+:func:`use_gl_backend` draws one small frame with each backend in a child process and sets
+``MUJOCO_GL`` to the first that works. Only the standard library is imported here, so that
+a program can choose before ``mujoco`` loads. How to install one: docs/guides/videos.md.
 """
 
 from __future__ import annotations

@@ -1,14 +1,8 @@
 """Return profiles of final archives: the share of the grid whose elites return at least x.
 
-Coverage counts every filled cell alike and the QD-Score adds up their returns, so two
-archives of equal score can differ in how many cells hold *good* policies: one may fill
-many cells with mediocre walkers, the other fewer with fast ones. A return profile shows
-which. For every return x it gives the percentage of all the grid's cells whose elite
-returns at least x, a complementary cumulative distribution over the cells; read at the
-lowest elite's return it is the coverage, and it falls to 0 past the best elite.
-
-The report plots it per method (mean over seeds with a ±std band, on one return axis per
-task) and tabulates it at :data:`PROFILE_LEVELS` of the task's best return in the report.
+:func:`archive_profile` gives one archive's profile, :func:`method_profile` its mean over
+seeds; the report plots them and tabulates them at :data:`PROFILE_LEVELS` of the task's best
+return. Why a profile: docs/guides/reproduce-paper-results.md (``profiles/*.png``).
 """
 
 from __future__ import annotations

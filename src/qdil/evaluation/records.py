@@ -1,23 +1,9 @@
-"""Run records: the few kilobytes of a finished run that a report needs, kept beside it.
+"""Run records: the few files of a finished run that a report needs, kept with the report.
 
-A run directory holds checkpoints of every policy (megabytes per elite archive) and lives on
-the machine that trained it. A report's numbers should outlive that machine: ``qdil report``
-copies, for every run it includes, a **record** into ``<out>/runs/<run name>/``:
-
-- ``config.yaml`` and ``metrics.csv``, copied (the recipe that reproduces the run and its
-  learning curves),
-- ``eval.json``, copied when the numbers come from ``qdil eval``, and ``provenance.json``
-  (the commit and versions of each start of the run),
-- ``record.json``: the iteration, the source of the final metrics, the metrics themselves,
-  the notes the report made, and the provenance of the training, the re-scoring (its reset
-  seed and episodes per elite) and the report,
-- ``archive.csv``: the final archive without policies, one row per elite (cell index,
-  objective, measures).
-
-A record is itself a run directory as :func:`qdil.evaluation.runs.load_run` reads it: a later
-``qdil report docs/reports/x/runs runs/new-seed --out docs/reports/x --force`` (``--force``:
-git tracks the report's files) rebuilds the same tables from the records and adds the new
-run, with no checkpoint in sight.
+:func:`write_record` copies a run's recipe, metrics and provenance and writes its final
+numbers and its archive without policies; a record is a run directory that
+:func:`qdil.evaluation.runs.load_run` reads (:func:`is_record`, :func:`read_record`), so a
+report outlives the machine that trained its runs: docs/guides/reproduce-paper-results.md.
 """
 
 from __future__ import annotations

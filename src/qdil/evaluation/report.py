@@ -1,46 +1,9 @@
 """``qdil report``: the paper's tables, Tukey HSD tests and figures from run directories.
 
-Which runs go in:
-
-- A given path is a run directory if it holds ``config.yaml``; otherwise every directory
-  directly inside it that holds ``config.yaml`` is a run. A path that is neither is listed as
-  left out.
-- A run is **left out** when its ``config.yaml`` is unreadable or names no ``env.task``,
-  when it has no ``metrics.csv`` (or the file has no rows), or when it has no readable
-  checkpoint (``checkpoints/last.pt``). Left-out runs are listed, with the reason, in the
-  report's "Runs left out / unfinished" section and in ``runs.csv``; they are never dropped
-  silently.
-- A run is **unfinished** when its last logged iteration or its checkpoint's iteration is
-  below ``qd.iterations``. Unfinished runs that have a checkpoint are still included
-  (tables, tests, figures) at the iteration of their checkpoint, flagged in the tables
-  (``n`` reads ``3*``) and listed in the same section.
-- A row pools the runs of one task, method label and configuration: runs of one label whose
-  recipes differ in more than the seed get rows of their own
-  (:mod:`qdil.evaluation.configurations`).
-
-Which numbers: a run's final metrics come from the corrected archive of ``qdil eval``
-(``eval.json`` and ``corrected_archive.pkl``, decision D12) when it exists and was made from
-the run's current checkpoint, otherwise from the training true-return archive of the
-checkpoint; the run list says which source each run used. Learning curves come from
-``metrics.csv`` (the training archive at every iteration). Both QD-Scores are reported
-(decision D10): the raw QD-Score (Σ true returns; QDIL/WQDIL papers) and the offset
-QD-Score (PPGA's convention, :data:`qdil.qd.archives.QD_OFFSETS`).
-
-Files written into the output folder: ``report.md`` and ``report.html`` (everything on one
-page), ``table.md`` / ``table.csv`` (main table, the true-keyed archives),
-``table_deployable.md`` / ``table_deployable.csv`` (the same of the deployable archives),
-``tukey.md`` / ``tukey.csv``, ``ratios.csv`` (every method's QD-Score over the expert's
-and GAIL's, with bootstrap intervals and the seeds a gap would need),
-``runs.csv`` (every run, its status and final metrics), ``profile.csv`` (the return
-profiles' table, :mod:`qdil.evaluation.profiles`), ``heatmaps/*.png``, ``curves/*.png``,
-``profiles/*.png``, ``videos/`` (a few elites of every run, when asked for:
-:mod:`qdil.evaluation.gallery`) and ``runs/`` (a record of every included run,
-:mod:`qdil.evaluation.records`: the report can be made again from them when the run
-directories are gone).
-
-The pieces: :mod:`qdil.evaluation.tables` (numbers), :mod:`qdil.evaluation.figures`
-(heatmaps and curves) and :mod:`qdil.evaluation.page` (the document); this module collects
-the runs and writes the files.
+:func:`write_report` collects the runs (:mod:`qdil.evaluation.runs`), has
+:mod:`qdil.evaluation.tables`, :mod:`qdil.evaluation.figures` and :mod:`qdil.evaluation.page`
+make the numbers, figures and page, writes the files and keeps a record of every run.
+Which runs go in, which numbers, which files: docs/guides/reproduce-paper-results.md.
 """
 
 from __future__ import annotations

@@ -1,15 +1,8 @@
 """``qdil eval``: re-score every elite on the true reward (PPGA's corrected metrics, D12).
 
-Branches are scored during training on a few stochastic episodes, so archive objectives
-are noisy. A corrected archive re-plays every elite for ``episodes`` deterministic episodes
-(mean actions, the elite's own observation statistics) and inserts it at its re-measured
-cell into a fresh archive; when two elites land in one cell the better one stays. Both
-policy archives of a run are corrected: the paper's true-keyed one and the deployable one
-(:mod:`qdil.qd.archives`).
-
-Cost: elites × episodes × mean episode length env steps per archive. Measured on 2 cores:
-the 1,280 elites of a 180-iteration Walker2d run, one episode each, 704,579 env steps in
-1 min 56 s (about 6,900 env-steps/s with loading); the time grows linearly with ``episodes``.
+:func:`rescore_archive` replays every elite of a run's two policy archives on deterministic
+episodes and writes the corrected archives and ``eval.json``; :func:`rescore` does one
+archive. Why, and what it costs: docs/guides/reproduce-paper-results.md.
 """
 
 from __future__ import annotations

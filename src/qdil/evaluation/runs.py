@@ -1,26 +1,9 @@
 """Run directories as ``qdil report`` sees them: discovery, method labels, final archives.
 
-Which runs go in:
-
-- A given path is a run directory if it holds ``config.yaml``; otherwise every directory
-  directly inside it that holds ``config.yaml`` is a run. A path that is neither is listed as
-  left out.
-- A run is **left out** when its ``config.yaml`` is unreadable or names no ``env.task``,
-  when it has no ``metrics.csv`` (or the file has no rows), or when it has no readable
-  checkpoint (``checkpoints/last.pt``) and is not a record that a report kept
-  (:mod:`qdil.evaluation.records`). Left-out runs are listed with the reason; they are
-  never dropped silently.
-- A run is **unfinished** when its last logged iteration or its checkpoint's iteration is
-  below ``qd.iterations``. Unfinished runs that have a checkpoint are still included, at
-  the iteration of their checkpoint, and flagged.
-
-Which numbers: a run's final metrics come from the corrected archive of ``qdil eval``
-(``eval.json`` and ``corrected_archive.pkl``, decision D12) when it exists and was made from
-the run's current checkpoint, otherwise from the training true-return archive of the
-checkpoint; :attr:`RunResult.source` says which. The deployable archive's metrics come the
-same way from ``eval.json``'s ``deployable`` part or from the checkpoint's deployable
-archive scored by its elites' true returns (:attr:`RunResult.deployable`). Learning curves
-come from ``metrics.csv``.
+:func:`collect_runs` finds and reads every run (:func:`load_run`); a run's final numbers come
+from ``qdil eval``'s corrected archives when they were made from its checkpoint, else from
+the checkpoint, and :attr:`RunResult.source` says which. Which runs are left out or
+unfinished, and why: docs/guides/reproduce-paper-results.md.
 """
 
 from __future__ import annotations

@@ -1,20 +1,9 @@
 """The archives of a QD-IL run and their metrics (decisions D1 and D10).
 
-A run keeps three pyribs ``GridArchive``s over the k foot-contact measures in [0, 1]^k:
-
-- ``main``: the CMA-MAE archive (``learning_rate``, ``threshold_min``) inside the pyribs
-  ``Scheduler``. Its objective is the *learned* return (learned reward + bonus), so
-  thresholds, xNES ranking and restarts never see the true reward.
-- ``true``: a passive MAP-Elites archive of the same solutions keyed on their **true**
-  return: the paper's reported archive, an oracle's choice of elites.
-- ``deployable``: a passive MAP-Elites archive keyed on the run's own objective (the learned
-  return as scored when the policy was proposed; the true return for ``qd.fitness: true``):
-  the best elite per cell that a user without the true reward gets. Its elites carry their
-  true return as the ``true_return`` field, so that the archive is reported like ``true``.
-
-Extra fields carried by every elite: its observation statistics (``obs_mean``,
-``obs_var``, ``obs_count``) and its mean episode length (``length``, for the offset
-QD-Score).
+:class:`RunArchives` holds a run's three grid archives over the foot-contact measures:
+``main`` (CMA-MAE, keyed on the learned return), ``true`` (keyed on the true return: the
+paper's) and ``deployable`` (keyed on the run's own objective). :func:`qd_metrics` scores one
+archive. Why three: docs/concepts/loop.md; the metrics: docs/concepts/metrics.md.
 """
 
 from __future__ import annotations

@@ -1,21 +1,9 @@
 """Checkpoints: everything a killed run needs to continue as if it had never stopped.
 
-A checkpoint holds the pyribs scheduler (CMA-MAE archive, emitter, xNES, their random
-generators) pickled as bytes, the two passive archives, VPPO's critics, optimisers, return
-statistics and noise generator, the reward model's parameters, optimiser states and extra
-state, and the loop's counters and seed stream. Archives are pickled compactly: a pyribs
-``ArrayStore`` preallocates every field for every cell (a 50×50 Walker2d archive holds 2,500
-policies of ~15 k parameters whether or not the cells are occupied), so only the occupied
-rows are written and the full arrays are rebuilt on load. It is written to a temporary file in the
-same folder, flushed to disk and renamed over ``checkpoints/last.pt``, so a crash at any
-moment leaves either the previous checkpoint or the new one, never half of one; the
-temporary file of a killed write is removed when the run starts or resumes
-(:func:`remove_stale_temporaries`).
-
-A checkpoint also stores the run's resolved recipe (``config``), so that a resume whose
-``config.yaml`` was edited since is refused, naming the keys that differ
-(:func:`config_differences`). Checkpoints written before it was stored have no ``config``
-and are resumed without the comparison.
+:func:`save_checkpoint` replaces ``checkpoints/last.pt`` atomically, archives pickled with
+their occupied cells only (:func:`dumps_compact`); :func:`load_checkpoint` restores a run,
+:func:`load_archives` a run's archives alone, and :func:`config_differences` names the recipe
+keys a resume would change. What a checkpoint holds, and resuming: docs/concepts/recipes.md.
 """
 
 from __future__ import annotations

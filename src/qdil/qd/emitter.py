@@ -1,17 +1,10 @@
 """The PPGA emitter: branch the search policy along VPPO's gradient estimates.
 
-``ask_dqd`` returns the search policy θ_μ; ``tell_dqd`` receives the Jacobian (parameter
-deltas from VPPO) and normalises its rows; ``ask`` samples λ coefficient vectors c_i from
-the evolution strategy and returns θ_μ + Σ_j c_ij ĝ_j; ``tell`` ranks the branches by archive
-improvement, updates the strategy, and restarts θ_μ at a random elite when no branch
-improved the archive. The walk of θ_μ (N2 PPO iterations on the strategy's mean) happens in
-the QD loop, which hands the moved θ_μ back through :attr:`theta`.
-
-Unlike pyribs' ``GradientArborescenceEmitter`` this emitter does not move θ_μ itself (PPGA
-moves it with PPO, not with a gradient optimiser), and it keeps θ_μ's extra archive fields
-(its observation-normalisation statistics) so that every branch and a restarted θ_μ carry
-the statistics they were evaluated with. On a restart, θ_μ takes the sampled elite's own
-statistics (PPGA's quirk Q5 took the first branch's).
+:class:`PPGAEmitter` normalises VPPO's Jacobian (``tell_dqd``), proposes branches
+θ_μ + Σ_j c_ij ĝ_j with coefficients from an evolution strategy (``ask``; :func:`resolve_es`),
+ranks them by archive improvement and restarts θ_μ at an elite when none improved (``tell``).
+The QD loop's walk moves θ_μ and hands it back (:attr:`PPGAEmitter.theta`). Why:
+docs/concepts/loop.md.
 """
 
 from __future__ import annotations

@@ -1,16 +1,8 @@
 """Exponential natural evolution strategies (xNES), as a pyribs evolution strategy.
 
-PPGA samples its gradient coefficients from xNES (Glasmachers et al., GECCO 2010,
-https://doi.org/10.1145/1830483.1830557); pyribs 0.12 ships no xNES (decision D11), so
-this is a :class:`ribs.emitters.opt.EvolutionStrategyBase` that any pyribs emitter accepts.
-Defaults are those of evotorch's ``XNES`` that PPGA used: center learning rate 1, scale and
-shape learning rates 0.6 (3 + ln n) / (n √n), NES rank utilities.
-
-The search distribution is N(μ, σ² B Bᵀ) with det B = 1. Each ``tell`` computes, with
-utilities u_i of the ranked samples z_i = (x_i − μ) / σ expressed in B's frame:
-
-    G_δ = Σ u_i z_i,  G_M = Σ u_i (z_i z_iᵀ − I),  G_σ = tr(G_M) / n,  G_B = G_M − G_σ I
-    μ ← μ + η_μ σ B G_δ,  σ ← σ exp(η_σ G_σ / 2),  B ← B exp(η_B G_B / 2)
+:class:`XNES` is a :class:`ribs.emitters.opt.EvolutionStrategyBase`, since pyribs ships no
+xNES (decision D11); PPGA samples its gradient coefficients from it. Its defaults and update:
+docs/concepts/loop.md (section "xNES").
 """
 
 from __future__ import annotations

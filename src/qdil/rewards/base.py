@@ -1,23 +1,9 @@
 """``RewardModel``: the contract between reward plugins and the QD loop.
 
-A reward model is a LightningModule with manual optimisation, driven by Lightning Fabric
-from the QD loop (never ``Trainer.fit`` per iteration). It has two faces, as in
-``imitation``: a differentiable :meth:`RewardModel.reward` that :meth:`update` trains, and a
-no-grad :meth:`RewardModel.predict_reward` that hands per-step rewards to RL.
-
-Lifecycle, driven by the QD loop:
-
-1. ``__init__(obs_dim, action_dim, num_measures, **hyperparameters)``: build networks.
-2. ``setup(demos)`` once: fit the input normalisation on the demonstrations and build what
-   depends on them (PWIL's expert atoms). Lightning's own ``setup`` hook is never called
-   under Fabric, so the name is free for this purpose. Then ``pretrain(demos)`` for
-   expensive offline fitting (GIRIL's conditional VAE); a resumed run skips it, since its
-   checkpoint holds the result.
-3. Every QD iteration: ``predict_reward(rollout, update=True)`` on the training rollouts,
-   ``predict_reward(rollout)`` on evaluation episodes, then one ``update(expert, policy,
-   iteration)`` on expert and policy transitions (decision D3).
-
-Class attributes declare what the model needs, so the loop never dispatches on names.
+A reward model is a LightningModule with manual optimisation that the QD loop calls itself
+(never ``Trainer.fit``): :meth:`RewardModel.setup` once, then :meth:`RewardModel.predict_reward`
+and :meth:`RewardModel.update` every iteration; class flags declare what it needs. Lifecycle
+and rules: docs/rewards/index.md (section "The contract").
 """
 
 from __future__ import annotations

@@ -1,14 +1,8 @@
 """The single-step archive exploration bonus (WQDIL, decision D5), as a reward wrapper.
 
-r_exp(s) = 1 / (1 + p(δ(s))) with p(δ(s)) = n(C(δ(s))) / Σ_i n(C_i), where the cells C_i
-of the single-step archive partition the space of single-step measures δ(s) and n counts
-visits (the paper's Eqs. r_exp). With 0/1 foot-contact flags the cells are the 2^k contact
-patterns; ``cells`` gives a finer grid over [0, 1]^k for continuous δ.
-
-Visits count on training rollouts only (``predict_reward(..., update=True)``), step by
-step: the bonus of step t uses the counts before step t's N visits are added, as in the
-QD-IL code. Counts start at 1 per cell (so p is defined from the start), persist for the
-whole run and go into checkpoints. The bonus lies in [weight/2, weight).
+:class:`ExplorationBonus` adds w / (1 + p(δ(s))) to any reward model's rewards, p the share of
+training visits that fell in δ(s)'s cell of the single-step archive. Equations, the counting
+rule and measurements: docs/rewards/bonus.md.
 """
 
 from __future__ import annotations

@@ -1,23 +1,9 @@
 """The reward-model contract as checks any installed reward model can run, plugins included.
 
-qdil's own tests run them over every registered model (tests/rewards/test_contract.py); a
-plugin author runs them on an installed or local plugin without a source checkout::
-
-    python -m qdil.rewards.contract lsgail          # PASS / SKIP / FAIL per check, exit 1 on FAIL
-
-or from the plugin's own pytest suite::
-
-    import pytest
-    from qdil.rewards.contract import CHECKS
-
-    @pytest.mark.parametrize("check", CHECKS.values(), ids=CHECKS.keys())
-    def test_contract(check):
-        note = check("lsgail")
-        if note:
-            pytest.skip(note)
-
-The data are separable synthetic transitions: expert around +2, policy around −2, with
-different contact patterns (k = 2).
+:data:`CHECKS` maps each check's name to a function of a registered name that returns None
+(pass) or why it does not apply (skip), and raises AssertionError on failure;
+``python -m qdil.rewards.contract NAME`` runs them all (:func:`main`). In a plugin's own
+tests: docs/guides/write-a-reward-plugin.md (section 3).
 """
 
 from __future__ import annotations

@@ -1,22 +1,8 @@
 """Extrinsic Behavioral Curiosity (EBC; Wan et al., ICML 2025), as a reward wrapper.
 
-https://arxiv.org/abs/2410.06151, public code ``vanzll/EBC``. An external critic, the QD
-archive itself, rewards a training rollout whose behaviour is new to the archive:
-
-    r_t^n = r^model_t^n + p + q · 1[cell(m̄^n) is unoccupied in the archive],
-    m̄^n = mean over the rollout's valid steps t of δ(s_t^n),
-
-for every step t of simulation n. m̄^n is the measure of simulation n's whole rollout window
-(``rl.rollout_length`` steps, episode boundaries included, as the public code's
-``GridArchive.cal_bonus`` averages its 128-step window); the cell is the CMA-MAE archive's
-(``qd.cells`` per measure over [0, 1]^k) and "occupied" means it holds an elite. q is
-``bonus.weight`` (the public runners: 2) and p is ``bonus.offset`` (the runners: 0).
-
-The bonus goes to training rollouts only: evaluations, and so the archives' objectives, see
-the wrapped model's rewards alone, as in the public code (its archive ranks by a return the
-bonus never enters). The bonus has no state of its own: it reads the live archive, which
-checkpoints already hold (the pickled scheduler), so a resumed run's bonus continues from
-the restored archive.
+:class:`EBCBonus` adds p + q · 1[the rollout's mean measure falls in a cell of the CMA-MAE
+archive that holds no elite] to every step of a training rollout; evaluations get the wrapped
+model's rewards alone. Equations, the public code it follows, measurements: docs/rewards/ebc.md.
 """
 
 from __future__ import annotations

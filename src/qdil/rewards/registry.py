@@ -1,14 +1,10 @@
 """A small registry of reward models (in the spirit of timm's model registry).
 
-Three sources, in this order:
-
-1. built-ins, registered by :func:`register_reward` when :mod:`qdil.rewards` is imported;
-2. installed packages, through the entry-point group ``qdil.rewards`` (each entry point
-   names a module to import or a ``RewardModel`` subclass);
-3. local plugin folders, ``./plugins`` and the folders in ``$QDIL_PLUGIN_PATH``: every ``*.py``
-   file and package directly inside them is imported.
-
-A name registered twice by different classes is an error, wherever they come from.
+:func:`register_reward` files a class under a name. The first look-up (:func:`get_reward`,
+:func:`list_rewards`) runs :func:`discover`: it imports :mod:`qdil.rewards.builtin`, whose
+import registers the built-ins, then the entry points of the group ``qdil.rewards``, then the
+local plugin folders; importing :mod:`qdil.rewards` alone registers nothing. Rules:
+docs/rewards/index.md; plugins: docs/guides/write-a-reward-plugin.md.
 """
 
 from __future__ import annotations

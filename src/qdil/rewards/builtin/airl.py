@@ -1,14 +1,8 @@
 """``airl``: Adversarial Inverse Reinforcement Learning (Fu, Luo & Levine, ICLR 2018).
 
-https://arxiv.org/abs/1710.11248. The discriminator has the structure
-D(s, a, s') = exp f / (exp f + π(a | s)) with f(s, a, s') = g(s, a) + γ h(s') − h(s): a reward
-term g and a shaping potential h. Its logit is f − log π(a | s), trained with binary
-cross-entropy (expert 1, policy 0) and a gradient penalty on f. The policy is rewarded with
-f (``reward_type="f"``, default: QD-IL evaluates many policies, so the reward must not
-depend on one policy's likelihood) or with the full logit f − log π.
-
-The QD loop fills both batches' log-probabilities with the current search policy's
-(``needs_log_probs``).
+:class:`AIRL`: a discriminator D = exp f / (exp f + π(a | s)) with f = g(s, a) + γ h(s') − h(s);
+the policy is rewarded with f (default) or with the logit f − log π(a | s). Equations and
+choices: docs/rewards/airl.md.
 """
 
 from __future__ import annotations

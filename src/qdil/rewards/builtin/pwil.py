@@ -1,15 +1,8 @@
 """``pwil``: Primal Wasserstein Imitation Learning (Dadashi et al., ICLR 2021).
 
-https://arxiv.org/abs/2006.04678. An offline reward: no training. The expert's
-standardised (s, a) pairs are D atoms of weight 1/D. Along an episode, each agent step is an
-atom of weight 1/T (T the horizon) that is transported greedily to its nearest expert atoms
-that still hold weight; the step's cost c_t = Σ w·‖x − e‖ is the transported distance and
-the reward is r_t = α exp(−β T c_t / √d), with d the atom size and α = β = 5 (the paper's
-defaults). The expert pool resets at every episode start, per environment.
-
-Consecutive training rollouts of one VPPO phase continue each other column by column
-(``Rollout.starts`` marks the resets), so the pools persist between calls with
-``update=True``; evaluation episodes use fresh pools.
+:class:`PWIL`, an offline reward: each episode's steps are transported greedily onto the
+demonstrations, and a step that lands close to still-unused expert mass earns a high reward,
+r_t = α exp(−β T c_t / √d). Equations and the per-simulation pools: docs/rewards/pwil.md.
 """
 
 from __future__ import annotations

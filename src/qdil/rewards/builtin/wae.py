@@ -1,32 +1,10 @@
 """The WAE family of WQDIL (Yu et al., AAMAS 2025, https://arxiv.org/abs/2411.06965).
 
-A Wasserstein auto-encoder (Tolstikhin et al., 2018) with encoder Q_φ(z | x) and decoder
-G_ψ(z) embeds x = (s, a), or x = (s, a, δ(s)) with measure conditioning ("mC"); a latent
-adversary separates expert codes z^e from policy codes z^π. Per gradient step (the paper's
-appendix algorithms, with n the minibatch size and f_c(x, y) = ‖x − y‖²):
-
-- ``wae_gail`` (Alg. "WAE-GAIL"): D ascends (λ/n) Σ [log D(z̃) + log D(z^e) + log(1 − D(z^π))]
-  with z̃ ~ N(0, I); Q and G descend (1/n) Σ [f_c(x^e, G(z^e)) + f_c(x^π, G(z^π))
-  − λ (log D(z^e) + log D(z^π))].
-- ``wae_wgail`` (Alg. "WAE-WGAIL"): a 1-Lipschitz critic D_W (gradient penalty) ascends
-  (λ/n) Σ [D_W(z^e) − D_W(z^π)]; Q and G descend the reconstruction terms only (decision
-  D7; ``adversarial_ae=True`` adds Eq. 8's λ E[D_W(z^e) − D_W(z^π)]).
-- ``mcwae_wgail`` (Alg. "mCWAE-WGAIL", WQDIL's reward) and ``mcwae_gail``: the same on
-  x = (s, a, δ(s)).
-
-Reward (decision D6): r = −log(1 − σ(D(z̄)) + 1e-8) at the encoder mean z̄ = E[Q_φ(z | x)],
-the GAIL form the paper routes every reward through; ``reward_type`` offers the raw critic
-value and σ(D(z̄)). A Wasserstein critic is not a calibrated logit (its expert–policy gap
-grows and its offset drifts), so ``calibrated`` first maps it onto one: after every update
-the critic's means on the expert (μ_e) and on the iteration's policy data (μ_π) fix the
-logit ℓ = 4·(D − (μ_e + μ_π)/2) / max(μ_e − μ_π, min_gap), which puts the expert's mean
-at ℓ = +2 (r ≈ 2.13) and the policy's at ℓ = −2 (r ≈ 0.13) whatever the critic's scale
-(see :func:`calibrated_logit`). ``standardized`` instead standardises the critic on the
-policy's data, ℓ = (D − μ_π)/σ_π, so that a well-separating critic does not flatten the
-differences between policy transitions (:func:`standardized_logit`). Unspecified by the
-paper, chosen here and documented: encoder, decoder and adversary widths (100, 100),
-latent size 32 (8 until 2026-11-25: too small to keep the action, docs/rewards/balance.md),
-a Gaussian encoder.
+:class:`WAEReward`: a Wasserstein auto-encoder embeds (s, a), or (s, a, δ(s)) with measure
+conditioning, and a latent adversary scores the codes. :class:`WAEGAIL`, :class:`WAEWGAIL`,
+:class:`MCWAEWGAIL` and :class:`MCWAEGAIL` register ``wae_gail``, ``wae_wgail``,
+``mcwae_wgail`` and ``mcwae_gail``. Equations, decisions D6 and D7 and the choices the paper
+leaves open: docs/rewards/wae_wgail.md and docs/rewards/wae_gail.md.
 """
 
 from __future__ import annotations
