@@ -86,10 +86,10 @@ def test_a_recipe_on_a_device_backend_steps_through_the_torch_face(tmp_path) -> 
     with policies on the GPU and failed at the first action (first run on an H200).
     """
     pytest.importorskip("mujoco_warp", reason="the warp extra is not installed")
-    from qdil.rl.collect_device import DeviceCollector
+    from qdil.envs.torch_vector import TorchVectorEnv
 
     on_warp = build(SMOKE, tmp_path / "warp", "--env.backend", "warp")
     assert type(on_warp.vppo.executor) is DeviceExecutor
-    assert isinstance(on_warp.vppo.executor.collector, DeviceCollector)
+    assert isinstance(on_warp.vppo.executor.collector.env, TorchVectorEnv)
     on_c = build(SMOKE, tmp_path / "c")
     assert type(on_c.vppo.executor) is LocalExecutor

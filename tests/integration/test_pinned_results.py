@@ -28,6 +28,7 @@ import torch
 
 from qdil import numerics
 from qdil.cli import main
+from qdil.envs.faces import torch_face
 from qdil.envs.vector import LocomotionVectorEnv
 from qdil.rl.collect import Collector
 from qdil.rl.episodes import evaluate_policies
@@ -126,7 +127,7 @@ def fitted_stats(num: int) -> RunningMeanStd:
 
 def test_training_rollouts_are_pinned() -> None:
     env = LocomotionVectorEnv("Walker2d-v5", 6, max_episode_steps=30, autoreset_mode="SameStep")
-    collector = Collector(env)
+    collector = Collector(torch_face(env))
     collector.start(seed=11)
     actor = VectorizedActor(3, 17, 6)
     actor.set_solutions(policies(3, seed=1))

@@ -15,10 +15,11 @@ import torch
 
 pytest.importorskip("mujoco_warp", reason="the warp extra is not installed")
 
+from qdil.envs.faces import HostFace
 from qdil.envs.torch_vector import TorchVectorEnv
 from qdil.envs.vector import LocomotionVectorEnv
 from qdil.rl.collect import Collector
-from qdil.rl.collect_device import DeviceCollector, evaluate_on_device
+from qdil.rl.collect_device import evaluate_on_device
 from qdil.rl.episodes import evaluate_policies
 from qdil.rl.networks import VectorizedActor
 from qdil.rl.normalize import RunningMeanStd
@@ -50,7 +51,7 @@ def test_training_rollouts_equal_the_numpy_path() -> None:
     env = _env("SameStep")
     actor, stats = _policies(3)
     results = []
-    for collector in (Collector(env), DeviceCollector(env, reset_depth=3)):
+    for collector in (Collector(HostFace(env)), Collector(TorchVectorEnv(env, reset_depth=3))):
         collector.start(seed=7)
         generator = torch.Generator().manual_seed(0)
         rollouts = [
@@ -118,7 +119,7 @@ def test_autoresets_without_the_solver_change_no_bit(task: str, monkeypatch) -> 
         actor.set_solutions(
             np.stack([actor.initial_solution(obs_dim, action_dim, seed=s) for s in range(2)]) * 30
         )
-        collector = DeviceCollector(env, reset_depth=2)
+        collector = Collector(TorchVectorEnv(env, reset_depth=2))
         collector.start(seed=3)
         rollout, _ = collector.collect(
             actor, RunningMeanStd(2, (obs_dim,)), 8, torch.Generator().manual_seed(1), False

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import torch
 
+from qdil.envs.faces import torch_face
 from qdil.envs.vector import LocomotionVectorEnv
 from qdil.rl.collect import Collector
 from qdil.rl.networks import VectorizedActor
@@ -73,7 +74,7 @@ def test_evaluation_of_recorded_true_rewards_equals_the_true_return(vppo) -> Non
 
 def test_collector_aligns_contacts_with_observations() -> None:
     env = LocomotionVectorEnv("Hopper-v5", 4, max_episode_steps=30, autoreset_mode="SameStep")
-    collector = Collector(env)
+    collector = Collector(torch_face(env))
     collector.start(seed=0)
     actor = VectorizedActor(2, 11, 3)
     actor.set_solutions(np.stack([VectorizedActor.initial_solution(11, 3, seed=s) for s in (0, 1)]))
@@ -146,7 +147,7 @@ def test_next_state_values_equal_a_second_critic_pass_bit_for_bit(update_stats: 
     from qdil.rl.ppo import next_state_values, to_policies
 
     env = LocomotionVectorEnv("Hopper-v5", 6, max_episode_steps=30, autoreset_mode="SameStep")
-    collector = Collector(env)
+    collector = Collector(torch_face(env))
     collector.start(seed=3)
     actor = VectorizedActor(3, 11, 3)
     actor.set_solutions(

@@ -19,6 +19,11 @@ from qdil.envs.physics import Export, MujocoBatch
 BACKENDS = ("mujoco", "warp")
 """Values of ``env.backend``."""
 
+DEVICE_BACKENDS = ("warp",)
+"""Backends whose physics state lives in torch tensors on ``env.device`` (Warp's CPU device
+included): RL steps them through :class:`~qdil.envs.torch_vector.TorchVectorEnv`, the
+others through :class:`~qdil.envs.faces.HostFace`."""
+
 
 def make_physics(
     backend: str,

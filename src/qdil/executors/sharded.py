@@ -22,7 +22,7 @@ from qdil.data import Rollout
 from qdil.envs.vector import LocomotionVectorEnv
 from qdil.executors.shards import MIN_ROWS, advance, payload_bytes, shard_bounds
 from qdil.executors.worker import CollectCall, EvaluateCall, Phase, Played
-from qdil.rl.collect import PolicyData, RewardFn, RolloutSteps, finish_rollout
+from qdil.rl.collect import EpisodeLog, PolicyData, RewardFn, RolloutSteps, finish_rollout
 from qdil.rl.episodes import Evaluation, score
 from qdil.rl.execution import Executor
 from qdil.rl.networks import VectorizedActor
@@ -53,7 +53,7 @@ class ShardedExecutor(Executor):
         self._phase = Phase(0, 0)
         self._history: list[Any] = []
         self._evaluations = 0
-        self._episodes: tuple[list[float], list[int]] = ([], [])
+        self.episodes = EpisodeLog()
 
     # ------------------------------------------------------------ the transport
     @abc.abstractmethod
@@ -126,21 +126,23 @@ class ShardedExecutor(Executor):
         self.bytes_sent += payload_bytes(call) * len(self.bounds)
         self.bytes_received += payload_bytes(parts)
         advance(generator, n, self.action_dim, num_steps)
+
+        def joined(field: str) -> torch.Tensor:  # the shards side by side, in order
+            return torch.cat([getattr(p, field) for p in parts], 1)
+
         steps = RolloutSteps(
             {key: torch.cat([p.buffers[key] for p in parts], 1) for key in parts[0].buffers},
-            torch.cat([p.norm_obs for p in parts], 1),
-            torch.cat([p.policy_actions for p in parts], 1),
-            _merge_ended(parts, num_steps),
+            joined("norm_obs"),
+            joined("policy_actions"),
+            joined("episode_returns"),
+            joined("episode_lengths"),
         )
-        for _, _, returns, lengths in steps.ended:
-            self._episodes[0].extend(returns.tolist())
-            self._episodes[1].extend(lengths.tolist())
+        self.episodes.add(steps)
         return finish_rollout(steps, num_policies, stats, self.obs_clip, update_stats)
 
     def pop_episode_stats(self) -> tuple[list[float], list[int]]:
         """Returns and lengths of the training episodes finished since the last call."""
-        episodes, self._episodes = self._episodes, ([], [])
-        return episodes
+        return self.episodes.pop()
 
     def evaluate(
         self,
@@ -194,18 +196,6 @@ class ShardedExecutor(Executor):
             episodes,
             reward_fn,
         )
-
-
-def _merge_ended(
-    parts: list[RolloutSteps], num_steps: int
-) -> list[tuple[int, np.ndarray, np.ndarray, np.ndarray]]:
-    """The shards' ended episodes in the local order: by step, then by simulation."""
-    merged = []
-    for t in range(num_steps):
-        found = [e for p in parts for e in p.ended if e[0] == t]
-        if found:
-            merged.append((t, *(np.concatenate([e[i] for e in found]) for i in (1, 2, 3))))
-    return merged
 
 
 def _cat(rollouts: list[Any], dim: int) -> Rollout:

@@ -12,13 +12,14 @@ references, so a retried call returns what the first attempt would have.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Any
 
 import torch
 
 from qdil import numerics
 from qdil.data import Rollout
+from qdil.envs.faces import torch_face
 from qdil.envs.vector import LocomotionVectorEnv
 from qdil.executors.shards import NoiseReplay, ShardPolicies
 from qdil.rl.collect import Collector, RolloutSteps
@@ -107,7 +108,7 @@ class ShardWorker:
         torch.set_num_threads(threads)
         self.factory, self.start, self.stop, self.threads = factory, start, stop, threads
         env = factory(stop - start, autoreset_mode="SameStep", num_threads=threads)
-        self.collector = Collector(env)
+        self.collector = Collector(torch_face(env))
         self.eval_envs: dict[int, LocomotionVectorEnv] = {}
         self.phase: int | None = None
         self.calls = 0
@@ -144,8 +145,7 @@ class ShardWorker:
             lambda obs: policies.sample(obs, noise(), False, True), call.num_steps
         )
         self.calls += 1
-        ended = [(t, index + self.start, r, n) for t, index, r, n in steps.ended]
-        return replace(steps, ended=ended)
+        return steps
 
     # ---------------------------------------------------------------- evaluation
     def evaluate(self, call: EvaluateCall, start: int, stop: int) -> Played:

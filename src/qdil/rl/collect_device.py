@@ -1,18 +1,11 @@
-"""Rollouts and evaluations whose physics, policies and buffers stay on one torch device.
+"""Evaluations whose physics, policies and episodes stay on one torch device.
 
-The twins of :class:`~qdil.rl.collect.Collector` and
-:func:`~qdil.rl.collect.evaluate_policies` for device backends (``env.backend: warp``):
-they step the environment through its torch face
-(:class:`~qdil.envs.torch_vector.TorchVectorEnv`), so actions, observations, rewards and
-the rollout buffers never leave the device within a rollout. What goes to the host, and
-when:
-
-- a training rollout: nothing per step; the finished episodes' returns and lengths once, in
-  :meth:`DeviceCollector.pop_episode_stats`, and the reset-noise queues every
-  ``reset_depth`` steps (:class:`TorchVectorEnv`);
-- an evaluation: whether any episode still runs, once every ``sync_every`` steps (the steps
-  after the last episode ended change nothing: every simulation sits out of them), and the
-  scores once at the end, as numpy arrays for pyribs.
+The twin of :func:`~qdil.rl.episodes.evaluate_policies` for device backends
+(``env.backend: warp``): it steps the environment through its torch face
+(:class:`~qdil.envs.torch_vector.TorchVectorEnv`). What goes to the host, and when: whether
+any episode still runs, once every ``sync_every`` steps (the steps after the last episode
+ended change nothing: every simulation sits out of them), and the scores once at the end,
+as numpy arrays for pyribs.
 
 The same seeds give the same rollouts as the numpy path on the same backend
 (``tests/rl/test_collect_device.py``).
@@ -25,145 +18,11 @@ import torch
 
 from qdil.data import Rollout
 from qdil.envs.torch_vector import TorchVectorEnv
-from qdil.envs.vector import LocomotionVectorEnv
-from qdil.rl.collect import ActionMap, PolicyData, RewardFn, policy_blocks
+from qdil.rl.collect import ActionMap, RewardFn
 from qdil.rl.episodes import Evaluation, EvaluationGroup
 from qdil.rl.networks import VectorizedActor
 from qdil.rl.normalize import RunningMeanStd
 from qdil.rl.sampler import PolicySampler
-
-
-class DeviceCollector:
-    """Collects fixed-length rollouts on the physics' device (``SAME_STEP`` autoreset).
-
-    The same interface as :class:`~qdil.rl.collect.Collector`; rollouts and policy data
-    are tensors on :attr:`device`.
-
-    Args:
-        env: the training environment, on a device backend (``autoreset_mode=SAME_STEP``).
-        obs_clip: bound of normalised observations.
-        reset_depth: initial states queued per simulation (see :class:`TorchVectorEnv`).
-    """
-
-    def __init__(
-        self, env: LocomotionVectorEnv, obs_clip: float = 10.0, reset_depth: int = 16
-    ) -> None:
-        if env.autoreset_mode.value != "SameStep":
-            raise ValueError("the training environment must use autoreset_mode=SAME_STEP")
-        self.env = env
-        self.torch_env = TorchVectorEnv(env, reset_depth)
-        self.device = self.torch_env.device
-        self.obs_clip = obs_clip
-        space = env.single_action_space
-        self.action_map = ActionMap(space.low, space.high, self.device)
-        self._episodes: list[tuple[torch.Tensor, torch.Tensor, torch.Tensor]] = []
-        self._obs: torch.Tensor | None = None
-        self._contacts: torch.Tensor | None = None
-        self._starts: torch.Tensor | None = None
-
-    def start(self, seed: int) -> None:
-        """Reset every simulation (the start of a VPPO phase)."""
-        obs, contacts = self.torch_env.reset(seed)
-        self._obs = obs.float()
-        self._contacts = contacts
-        self._starts = torch.ones(len(obs), device=self.device)
-
-    def collect(
-        self,
-        actor: VectorizedActor,
-        stats: RunningMeanStd,
-        num_steps: int,
-        generator: torch.Generator,
-        update_stats: bool,
-    ) -> tuple[Rollout, PolicyData]:
-        """Roll out ``num_steps`` steps of P policies on the N simulations.
-
-        Args:
-            actor: P policies on :attr:`device`; N must be divisible by P.
-            stats: their observation statistics on :attr:`device` (frozen in the rollout).
-            num_steps: T.
-            generator: random source of the action noise, on :attr:`device`.
-            update_stats: merge the rollout's observations into ``stats`` afterwards.
-
-        Returns:
-            The rollout (raw observations, executed actions, true rewards) and PPO's extras,
-            (T, N, ...) tensors on :attr:`device`.
-        """
-        if self._obs is None or self._contacts is None or self._starts is None:
-            raise RuntimeError("call start() before collect()")
-        n = self.env.num_envs
-        if n % actor.num_models:
-            raise ValueError(f"{n} environments cannot be split among {actor.num_models} policies")
-        obs_dim, k = self._obs.shape[1], self._contacts.shape[1]
-        action_dim = self.env.single_action_space.shape[0]
-        shape = (num_steps, n)
-
-        def zeros(*tail: int) -> torch.Tensor:
-            return torch.zeros((*shape, *tail), device=self.device)
-
-        buf = {
-            "obs": zeros(obs_dim),
-            "next_obs": zeros(obs_dim),
-            "actions": zeros(action_dim),
-            "contacts": zeros(k),
-            "next_contacts": zeros(k),
-            "rewards": zeros(),
-            "dones": zeros(),
-            "terminated": zeros(),
-            "log_probs": zeros(),
-            "starts": zeros(),
-        }
-        norm_obs, policy_actions = zeros(obs_dim), zeros(action_dim)
-        episode_returns = torch.zeros(shape, dtype=torch.float64, device=self.device)
-        episode_lengths = torch.zeros(shape, dtype=torch.int64, device=self.device)
-        sampler = PolicySampler(actor, stats, self.obs_clip)
-        buf["obs"][0] = self._obs
-        buf["contacts"][0] = self._contacts
-        buf["starts"][0] = self._starts
-        for t in range(num_steps):
-            norm, actions, log_probs = sampler.sample(buf["obs"][t], generator)
-            executed = self.action_map(actions)
-            step = self.torch_env.step(executed)
-            done = step.done
-            # s_{t+1} is the state the step reached, not the reset one
-            buf["next_obs"][t] = step.final_obs
-            buf["next_contacts"][t] = step.final_contacts
-            buf["actions"][t] = executed
-            buf["rewards"][t] = step.reward
-            buf["dones"][t] = done
-            buf["terminated"][t] = step.terminated
-            buf["log_probs"][t] = log_probs
-            norm_obs[t] = norm
-            policy_actions[t] = actions
-            episode_returns[t] = step.episode_return
-            episode_lengths[t] = step.episode_length
-            if t + 1 < num_steps:
-                buf["obs"][t + 1] = step.obs
-                buf["contacts"][t + 1] = step.contacts
-                buf["starts"][t + 1] = done
-        # where the next call goes on
-        self._obs = step.obs.float()
-        self._contacts = step.contacts
-        self._starts = done.float()
-        self._episodes.append((buf["dones"] > 0, episode_returns, episode_lengths))
-        rollout = Rollout(**buf, valid=torch.ones(shape, device=self.device))
-        num_policies = actor.num_models
-        next_by_policy = policy_blocks(buf["next_obs"].transpose(0, 1), num_policies)
-        norm_next = stats.normalize(next_by_policy.flatten(1, 2), clip=self.obs_clip)
-        norm_next = norm_next.reshape(n, num_steps, obs_dim).transpose(0, 1)
-        if update_stats:
-            stats.update(policy_blocks(buf["obs"].transpose(0, 1), num_policies).flatten(1, 2))
-        return rollout, PolicyData(norm_obs, norm_next, policy_actions, buf["log_probs"])
-
-    def pop_episode_stats(self) -> tuple[list[float], list[int]]:
-        """Returns and lengths of the episodes finished since the last call (one sync)."""
-        returns: list[float] = []
-        lengths: list[int] = []
-        for ended, episode_returns, episode_lengths in self._episodes:
-            returns += episode_returns[ended].tolist()
-            lengths += episode_lengths[ended].tolist()
-        self._episodes = []
-        return returns, lengths
 
 
 def evaluate_on_device(

@@ -13,10 +13,12 @@ import abc
 import torch
 
 from qdil.data import Rollout
-from qdil.envs.torch_vector import TorchVectorEnv, has_torch_face
+from qdil.envs.backends import DEVICE_BACKENDS
+from qdil.envs.faces import torch_face
+from qdil.envs.torch_vector import TorchVectorEnv
 from qdil.envs.vector import LocomotionVectorEnv
 from qdil.rl.collect import Collector, PolicyData, RewardFn
-from qdil.rl.collect_device import DeviceCollector, evaluate_groups_on_device, evaluate_on_device
+from qdil.rl.collect_device import evaluate_groups_on_device, evaluate_on_device
 from qdil.rl.episodes import Evaluation, EvaluationGroup, evaluate_policies
 from qdil.rl.networks import VectorizedActor
 from qdil.rl.normalize import RunningMeanStd
@@ -102,7 +104,7 @@ class LocalExecutor(Executor):
         self, train_env: LocomotionVectorEnv, eval_env: LocomotionVectorEnv, obs_clip: float
     ) -> None:
         """Bind the environments; the training one keeps its state across ``collect``."""
-        self.collector = Collector(train_env, obs_clip)
+        self.collector = Collector(torch_face(train_env), obs_clip)
         self.eval_env, self.obs_clip = eval_env, obs_clip
 
     def start(self, seed: int) -> None:
@@ -163,7 +165,7 @@ class DeviceExecutor(LocalExecutor):
         self, train_env: LocomotionVectorEnv, eval_env: LocomotionVectorEnv, obs_clip: float
     ) -> None:
         """Bind the environments' torch faces."""
-        self.collector = DeviceCollector(train_env, obs_clip)  # type: ignore[assignment]
+        self.collector = Collector(torch_face(train_env), obs_clip)
         self.eval_face = TorchVectorEnv(eval_env)
         self.eval_env, self.obs_clip = eval_env, obs_clip
 
@@ -219,4 +221,4 @@ class DeviceExecutor(LocalExecutor):
 
 def default_executor(train_env: LocomotionVectorEnv) -> LocalExecutor:
     """The in-process executor that fits the physics: on the device, or numpy's."""
-    return DeviceExecutor() if has_torch_face(train_env) else LocalExecutor()
+    return DeviceExecutor() if train_env.backend in DEVICE_BACKENDS else LocalExecutor()
