@@ -154,11 +154,12 @@ def test_evaluations_are_pinned(deterministic: bool) -> None:
         recorded.append(vars(rollout))
         return 2.0 * rollout.rewards + rollout.next_contacts.sum(-1)
 
+    face = torch_face(env)
     evaluation = evaluate_policies(
-        env, actor, fitted_stats(2), 2, 4, reward_fn, deterministic, generator=generator
+        face, actor, fitted_stats(2), 2, 4, reward_fn, deterministic, generator=generator
     )
     plain = evaluate_policies(
-        env, actor, fitted_stats(2), 2, 4, None, deterministic, 10.0, generator
+        face, actor, fitted_stats(2), 2, 4, None, deterministic, 10.0, generator
     )
     check(f"evaluation_{deterministic}", digest(vars(evaluation), recorded, vars(plain)))
 

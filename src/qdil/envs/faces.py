@@ -73,15 +73,26 @@ class HostFace:
         obs, info = self.env.reset(seed=seed, options=options)
         return torch.from_numpy(obs), torch.from_numpy(info["foot_contact"])
 
+    def episode_statistics(self) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """The numpy face's ``episode_statistics`` as tensors."""
+        returns, lengths, measures = self.env.episode_statistics()
+        return torch.from_numpy(returns), torch.from_numpy(lengths), torch.from_numpy(measures)
+
     def step(self, actions: torch.Tensor, mask: torch.Tensor | None = None) -> TorchStep:
         """The numpy face's ``step`` on (N, A) CPU actions, its arrays as tensors.
 
         Args:
-            actions: (N, A) float32 actions (checked by the environment: shape, NaN).
+            actions: (N, A) float32 CPU actions (checked by the environment: shape, NaN).
             mask: (N,) bool tensor of the sub-environments to advance (``DISABLED`` only).
         """
+        action_array = actions.numpy()
+        if not self.autoreset:
+            # evaluation episodes hand the C engine float64 actions, training rollouts
+            # float32 ones: the same values, but each control cost is computed in the
+            # precision its pinned results were computed in
+            action_array = action_array.astype(np.float64)
         obs, reward, terminated, truncated, info = self.env.step(
-            actions.numpy(), mask=None if mask is None else mask.numpy()
+            action_array, mask=None if mask is None else mask.numpy()
         )
         contacts = info["foot_contact"]
         obs_t, contacts_t = torch.from_numpy(obs), torch.from_numpy(contacts)
@@ -106,6 +117,7 @@ class HostFace:
             reward=torch.from_numpy(reward),
             terminated=torch.from_numpy(terminated),
             truncated=torch.from_numpy(truncated),
+            done=torch.from_numpy(terminated | truncated),
             contacts=contacts_t,
             final_contacts=final_contacts,
             episode_return=episode_return,

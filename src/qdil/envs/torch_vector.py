@@ -126,6 +126,15 @@ class TorchVectorEnv:
             return tensor.to(self.device)
         return tensor.pin_memory().to(self.device, non_blocking=True)
 
+    def episode_statistics(self) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """(N,) return, (N,) length and (N, k) measures of each current or last episode.
+
+        With autoreset disabled a finished sub-environment keeps them until it is reset:
+        they are what the step that ended its episode reported.
+        """
+        length = self._elapsed.clamp(min=1)
+        return self._return, self._elapsed, self._contact_sum / length[:, None]
+
     def _start_episodes(self, mask: torch.Tensor) -> None:
         """Zero the episode statistics where ``mask`` (N,) holds, after a physics reset."""
         position = self.task.position(self._arrays())
@@ -225,6 +234,7 @@ class TorchVectorEnv:
             reward=reward,
             terminated=terminated,
             truncated=truncated,
+            done=done,
             contacts=contacts,
             final_contacts=final_contacts,
             episode_return=episode_return,

@@ -178,6 +178,15 @@ class LocomotionVectorEnv(VectorEnv):
         """Seed the reset-noise generators as :meth:`reset` does (``None`` keeps them)."""
         self._seed(seed)
 
+    def episode_statistics(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(N,) return, (N,) length and (N, k) measures of each current or last episode.
+
+        With autoreset disabled a finished sub-environment keeps them until it is reset:
+        they are what ``info["episode"]`` reported when its episode ended.
+        """
+        length = np.maximum(self._elapsed, 1)
+        return self._return.copy(), self._elapsed.copy(), self._contact_sum / length[:, None]
+
     def draw_initial_states(self, ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(n, nq) positions and (n, nv) velocities of the next initial states of ``ids``.
 

@@ -21,9 +21,9 @@ import torch
 from qdil.data import Rollout
 from qdil.envs.vector import LocomotionVectorEnv
 from qdil.executors.shards import MIN_ROWS, advance, payload_bytes, shard_bounds
-from qdil.executors.worker import CollectCall, EvaluateCall, Phase, Played
+from qdil.executors.worker import CollectCall, EvaluateCall, Phase
 from qdil.rl.collect import EpisodeLog, PolicyData, RewardFn, RolloutSteps, finish_rollout
-from qdil.rl.episodes import Evaluation, score
+from qdil.rl.episodes import Evaluation, Played, score
 from qdil.rl.execution import Executor
 from qdil.rl.networks import VectorizedActor
 from qdil.rl.normalize import RunningMeanStd
@@ -185,17 +185,15 @@ class ShardedExecutor(Executor):
         self.bytes_received += payload_bytes(plays)
         if not deterministic:
             advance(generator, used, self.action_dim, num_steps)
-        rollout = _cat(rollouts, 1) if record else None
-        return score(
-            np.concatenate([p.returns for p in plays]),
-            np.concatenate([p.lengths for p in plays]),
-            np.concatenate([p.measures for p in plays]),
-            sum(p.env_steps for p in plays),
-            rollout,
-            actor.num_models,
-            episodes,
-            reward_fn,
+        played = Played(
+            returns=np.concatenate([p.returns for p in plays]),
+            lengths=np.concatenate([p.lengths for p in plays]),
+            measures=np.concatenate([p.measures for p in plays]),
+            env_steps=sum(p.env_steps for p in plays),
+            num_steps=num_steps,
+            rollout=_cat(rollouts, 1) if record else None,
         )
+        return score(played, actor.num_models, episodes, reward_fn)
 
 
 def _cat(rollouts: list[Any], dim: int) -> Rollout:

@@ -172,8 +172,7 @@ class Collector:
         def stack(field: str) -> torch.Tensor:
             return torch.stack([getattr(step, field) for step in steps])
 
-        terminated = stack("terminated")
-        dones = (terminated | stack("truncated")).float()
+        dones = stack("done").float()
         buffers = {
             "obs": obs_t,
             "next_obs": next_obs_t,
@@ -182,7 +181,7 @@ class Collector:
             "next_contacts": stack("final_contacts"),
             "rewards": stack("reward").float(),
             "dones": dones,
-            "terminated": terminated.float(),
+            "terminated": stack("terminated").float(),
             "log_probs": log_probs_t,
             "starts": torch.cat([self._starts[None], dones[:-1]]),
         }

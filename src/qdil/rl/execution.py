@@ -2,8 +2,7 @@
 
 VPPO hands its policies to an :class:`Executor` and gets rollouts and scores back; it keeps
 PPO, and the QD loop keeps the reward model, pyribs and xNES. :class:`LocalExecutor` (the
-default) steps the simulations in this process, :class:`DeviceExecutor` does so on a device
-backend's torch face; :mod:`qdil.executors` has the remote ones.
+default) steps the simulations in this process; :mod:`qdil.executors` has the remote ones.
 """
 
 from __future__ import annotations
@@ -13,13 +12,10 @@ import abc
 import torch
 
 from qdil.data import Rollout
-from qdil.envs.backends import DEVICE_BACKENDS
 from qdil.envs.faces import torch_face
-from qdil.envs.torch_vector import TorchVectorEnv
 from qdil.envs.vector import LocomotionVectorEnv
 from qdil.rl.collect import Collector, PolicyData, RewardFn
-from qdil.rl.collect_device import evaluate_groups_on_device, evaluate_on_device
-from qdil.rl.episodes import Evaluation, EvaluationGroup, evaluate_policies
+from qdil.rl.episodes import Evaluation, EvaluationGroup, evaluate_groups
 from qdil.rl.networks import VectorizedActor
 from qdil.rl.normalize import RunningMeanStd
 
@@ -84,8 +80,8 @@ class Executor(abc.ABC):
     ) -> list[Evaluation]:
         """Score several groups of policies, one after the other, noise from ``generator``.
 
-        An executor that plays them side by side (:class:`DeviceExecutor`) overrides it and
-        draws each group's noise from the group's own generator instead.
+        An executor that plays them side by side (:class:`LocalExecutor` on a device)
+        overrides it and draws each group's noise from the group's own generator instead.
         """
         return [
             self.evaluate(g.actor, g.stats, g.episodes, g.seed, reward_fn, deterministic, generator)
@@ -98,14 +94,20 @@ class Executor(abc.ABC):
 
 
 class LocalExecutor(Executor):
-    """Steps every simulation here, physics threaded by ``env.num_threads``."""
+    """Steps every simulation here, through the torch face that fits the physics.
+
+    The C engine's host face (physics threaded by ``env.num_threads``) or the device face
+    (:func:`~qdil.envs.faces.torch_face`): rollouts and evaluations never copy a step to
+    the host on a device.
+    """
 
     def setup(
         self, train_env: LocomotionVectorEnv, eval_env: LocomotionVectorEnv, obs_clip: float
     ) -> None:
-        """Bind the environments; the training one keeps its state across ``collect``."""
+        """Bind the environments' faces; the training one keeps its state across ``collect``."""
         self.collector = Collector(torch_face(train_env), obs_clip)
-        self.eval_env, self.obs_clip = eval_env, obs_clip
+        self.eval_face = torch_face(eval_env)
+        self.obs_clip = obs_clip
 
     def start(self, seed: int) -> None:
         """Reset every training simulation."""
@@ -137,60 +139,8 @@ class LocalExecutor(Executor):
         generator: torch.Generator,
     ) -> Evaluation:
         """Score P policies over ``episodes`` episodes each (``evaluate_policies``)."""
-        return evaluate_policies(
-            self.eval_env,
-            actor,
-            stats,
-            episodes,
-            seed,
-            reward_fn,
-            deterministic,
-            self.obs_clip,
-            generator,
-        )
-
-    def close(self) -> None:
-        """Nothing to release: the environments belong to the run."""
-
-
-class DeviceExecutor(LocalExecutor):
-    """Steps every simulation here through the env's torch face, on its device.
-
-    For device backends (``env.backend: warp``): rollouts and evaluations go through
-    :class:`~qdil.rl.collect_device.DeviceCollector` and
-    :func:`~qdil.rl.collect_device.evaluate_on_device`, so no step copies to the host.
-    """
-
-    def setup(
-        self, train_env: LocomotionVectorEnv, eval_env: LocomotionVectorEnv, obs_clip: float
-    ) -> None:
-        """Bind the environments' torch faces."""
-        self.collector = Collector(torch_face(train_env), obs_clip)
-        self.eval_face = TorchVectorEnv(eval_env)
-        self.eval_env, self.obs_clip = eval_env, obs_clip
-
-    def evaluate(
-        self,
-        actor: VectorizedActor,
-        stats: RunningMeanStd,
-        episodes: int,
-        seed: int,
-        reward_fn: RewardFn | None,
-        deterministic: bool,
-        generator: torch.Generator,
-    ) -> Evaluation:
-        """Score P policies over ``episodes`` episodes each (``evaluate_on_device``)."""
-        return evaluate_on_device(
-            self.eval_face,
-            actor,
-            stats,
-            episodes,
-            seed,
-            reward_fn,
-            deterministic,
-            self.obs_clip,
-            generator,
-        )
+        group = EvaluationGroup(actor, stats, episodes, seed, generator)
+        return evaluate_groups(self.eval_face, [group], reward_fn, deterministic, self.obs_clip)[0]
 
     def evaluate_all(
         self,
@@ -199,26 +149,24 @@ class DeviceExecutor(LocalExecutor):
         deterministic: bool,
         generator: torch.Generator,
     ) -> list[Evaluation]:
-        """Score the groups side by side in one batch where the environment has room.
+        """Score the groups: side by side on a device, else one after the other.
 
-        One batch takes as many steps in sequence as the longest group's episodes, not
-        their sum. Each group draws its noise from its own generator (``generator`` is left
-        alone), so its result is the same as from its own ``evaluate``
-        (``evaluate_groups_on_device``); without room for all of them (``env.eval_envs``
-        below their sum) the groups are played one after the other, with the same noise.
+        On a device (the face's ``side_by_side``) one batch takes as many steps in sequence
+        as the longest group's episodes, not their sum. Each group draws its noise from its
+        own generator there (``generator`` is left alone), so its result is the same as
+        alone (``evaluate_groups``); without room for all of them (``env.eval_envs`` below
+        their sum) the groups are played one after the other, with the same noise. The C
+        engine plays them in turns with ``generator``'s noise (:meth:`Executor.evaluate_all`).
         """
-        if sum(g.slots for g in groups) > self.eval_face.num_envs:
+        face = self.eval_face
+        if not face.side_by_side:
+            return super().evaluate_all(groups, reward_fn, deterministic, generator)
+        if sum(g.slots for g in groups) > face.num_envs:
             return [
-                evaluate_groups_on_device(
-                    self.eval_face, [g], reward_fn, deterministic, self.obs_clip
-                )[0]
+                evaluate_groups(face, [g], reward_fn, deterministic, self.obs_clip)[0]
                 for g in groups
             ]
-        return evaluate_groups_on_device(
-            self.eval_face, groups, reward_fn, deterministic, self.obs_clip
-        )
+        return evaluate_groups(face, groups, reward_fn, deterministic, self.obs_clip)
 
-
-def default_executor(train_env: LocomotionVectorEnv) -> LocalExecutor:
-    """The in-process executor that fits the physics: on the device, or numpy's."""
-    return DeviceExecutor() if train_env.backend in DEVICE_BACKENDS else LocalExecutor()
+    def close(self) -> None:
+        """Nothing to release: the environments belong to the run."""

@@ -46,7 +46,7 @@ from qdil.data import Rollout
 from qdil.envs.vector import LocomotionVectorEnv
 from qdil.rl.collect import ActionMap, PolicyData
 from qdil.rl.episodes import Evaluation, EvaluationGroup
-from qdil.rl.execution import Executor, LocalExecutor, default_executor
+from qdil.rl.execution import Executor, LocalExecutor
 from qdil.rl.networks import VectorizedActor, VectorizedCritic
 from qdil.rl.normalize import RunningMeanStd
 from qdil.rl.ppo import PPOSettings, ppo_update
@@ -202,11 +202,7 @@ class VPPO:
         self.train_env, self.eval_env = train_env, eval_env
         if train_env.autoreset_mode.value != "SameStep":
             raise ValueError("the training environment must use autoreset_mode=SAME_STEP")
-        if executor is None or type(executor) is LocalExecutor:
-            # in this process, the face that fits the physics: a recipe's default
-            # LocalExecutor on a device backend steps through the torch face
-            executor = default_executor(train_env)
-        self.executor = executor
+        self.executor = LocalExecutor() if executor is None else executor
         self.executor.setup(train_env, eval_env, self.obs_clip)
         self.action_map = ActionMap(
             train_env.single_action_space.low, train_env.single_action_space.high, self.device
