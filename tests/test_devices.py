@@ -55,10 +55,15 @@ def test_fit_refuses_cuda_on_the_mujoco_backend_before_building(tmp_path, monkey
 
 
 def test_policies_on_another_device_than_the_physics_are_refused() -> None:
+    """VPPO takes the physics' device; environments on two devices are refused."""
     train = LocomotionVectorEnv("Walker2d-v5", 3, autoreset_mode="SameStep")
     evaluation = LocomotionVectorEnv("Walker2d-v5", 3, autoreset_mode="Disabled")
-    with pytest.raises(ValueError, match=r"env\.device: the physics steps on cpu"):
-        VPPO().setup(train, evaluation, 0, device="meta")
+    algo = VPPO()
+    algo.setup(train, evaluation, 0)
+    assert algo.device == train.device == torch.device("cpu")
+    evaluation.device = torch.device("meta")
+    with pytest.raises(ValueError, match=r"env\.device: the training physics steps on cpu"):
+        VPPO().setup(train, evaluation, 0)
 
 
 def test_every_tensor_of_a_run_is_on_its_device(tmp_path, walker_demos) -> None:

@@ -14,7 +14,7 @@ import numpy as np
 import torch
 from gymnasium.vector import AutoresetMode
 
-from qdil.envs.backends import DEVICE_BACKENDS
+from qdil.devices import DEVICE_BACKENDS
 from qdil.envs.torch_step import TorchFace, TorchStep
 from qdil.envs.torch_vector import TorchVectorEnv
 from qdil.envs.vector import LocomotionVectorEnv
@@ -55,7 +55,7 @@ class HostFace:
             raise ValueError("a torch face supports autoreset_mode SAME_STEP and DISABLED")
         self.env = env
         self.num_envs, self.num_feet = env.num_envs, env.num_feet
-        self.device = torch.device("cpu")
+        self.device = env.device  # the CPU
         self.action_low = env.single_action_space.low
         self.action_high = env.single_action_space.high
         self.autoreset = env.autoreset_mode is AutoresetMode.SAME_STEP

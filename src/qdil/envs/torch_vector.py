@@ -31,7 +31,7 @@ import numpy as np
 import torch
 from gymnasium.vector import AutoresetMode
 
-from qdil.envs.backends import DEVICE_BACKENDS
+from qdil.devices import DEVICE_BACKENDS
 from qdil.envs.torch_step import TorchStep
 from qdil.envs.vector import LocomotionVectorEnv
 
@@ -67,7 +67,7 @@ class TorchVectorEnv:
         if reset_depth < 1:
             raise ValueError(f"reset_depth must be at least 1, got {reset_depth}")
         self.env, self.task, self.physics = env, env.task, env.physics
-        self.device: torch.device = env.physics.torch_device
+        self.device = env.device
         self.action_low = env.single_action_space.low
         self.action_high = env.single_action_space.high
         self.num_envs = n = env.num_envs

@@ -19,6 +19,7 @@ import numpy as np
 import torch
 
 from qdil.data import Rollout
+from qdil.devices import DEVICE_BACKENDS
 from qdil.envs.vector import LocomotionVectorEnv
 from qdil.executors.shards import MIN_ROWS, advance, payload_bytes, shard_bounds
 from qdil.executors.worker import CollectCall, EvaluateCall, Phase
@@ -78,7 +79,7 @@ class ShardedExecutor(Executor):
             ValueError: the physics runs on a device backend, whose simulations stay on
                 their device (naming ``env.backend``).
         """
-        if train_env.backend != "mujoco":
+        if train_env.backend in DEVICE_BACKENDS:
             raise ValueError(
                 f"env.backend: {train_env.backend!r} keeps its simulations on one device; "
                 "workers step the C MuJoCo backend only (set env.backend: mujoco, or drop "

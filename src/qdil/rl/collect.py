@@ -44,7 +44,7 @@ class ActionMap:
     """
 
     def __init__(
-        self, low: np.ndarray, high: np.ndarray, device: torch.device | str | None = None
+        self, low: np.ndarray, high: np.ndarray, device: torch.device | None = None
     ) -> None:
         self.low = torch.as_tensor(low, dtype=torch.float32, device=device)
         self.half = torch.as_tensor((high - low) / 2.0, dtype=torch.float32, device=device)

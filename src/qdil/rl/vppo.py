@@ -164,26 +164,23 @@ class VPPO:
         train_env: LocomotionVectorEnv,
         eval_env: LocomotionVectorEnv,
         seed: int,
-        device: torch.device | str = "cpu",
         executor: Executor | None = None,
     ) -> None:
         """Bind the environments and build the persistent critics.
 
-        Rollouts go through the environments' torch face where their physics has one (the
-        warp backend: no host copy per step), through gymnasium's numpy face otherwise.
+        The policies, critics, statistics, rollouts and the noise generator live on the
+        physics' device, ``train_env.device``.
 
         Args:
             train_env: ``SAME_STEP`` environment of the PPO phases; its N must be divisible
                 by k+1.
-            eval_env: ``DISABLED`` environment of the evaluations.
+            eval_env: ``DISABLED`` environment of the evaluations, on the same device.
             seed: seed of the critics' initialisation and the action noise.
-            device: the run's device: policies, critics, statistics, rollout buffers and
-                the noise generator live there; it must be the physics' device.
-            executor: who steps the simulations (default: here, on the physics' device).
+            executor: who steps the simulations (default: here, :class:`LocalExecutor`).
 
         Raises:
-            ValueError: if N is not divisible by k+1, or ``device`` is not the physics'
-                device (naming ``env.device``).
+            ValueError: if N is not divisible by k+1, or the environments' devices differ
+                (naming ``env.device``).
         """
         num_objectives = train_env.num_feet + 1
         if train_env.num_envs % num_objectives:
@@ -191,14 +188,12 @@ class VPPO:
                 f"env.num_envs={train_env.num_envs} must be divisible by k+1={num_objectives} "
                 "(one block of simulations per VPPO copy)"
             )
-        self.device = torch.device(device)
-        for env in (train_env, eval_env):
-            physics_device = getattr(env.physics, "torch_device", torch.device("cpu"))
-            if physics_device.type != self.device.type:
-                raise ValueError(
-                    f"env.device: the physics steps on {physics_device} but the policies "
-                    f"would run on {self.device}; one env.device places both"
-                )
+        if eval_env.device != train_env.device:
+            raise ValueError(
+                f"env.device: the training physics steps on {train_env.device} but the "
+                f"evaluations' on {eval_env.device}; one env.device places both"
+            )
+        self.device = train_env.device
         self.train_env, self.eval_env = train_env, eval_env
         if train_env.autoreset_mode.value != "SameStep":
             raise ValueError("the training environment must use autoreset_mode=SAME_STEP")
