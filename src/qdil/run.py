@@ -14,13 +14,13 @@ from qdil.config import BonusConfig, DemoConfig, EnvConfig, LoggingConfig, QDCon
 from qdil.demos.io import load_demos
 from qdil.devices import DEVICE_BACKENDS, fabric_settings
 from qdil.envs.vector import LocomotionVectorEnv
+from qdil.executors.base import Executor
 from qdil.qd.archives import RunArchives, deployable_fields, elite_fields, make_grid
 from qdil.qd.emitter import PPGAEmitter
 from qdil.qd.state import LoopState, Run
 from qdil.rewards.base import RewardModel
 from qdil.rewards.bonus import ExplorationBonus
 from qdil.rewards.ebc import EBCBonus
-from qdil.rl.execution import Executor
 from qdil.rl.networks import VectorizedActor
 from qdil.rl.normalize import RunningMeanStd
 from qdil.rl.vppo import VPPO

@@ -21,11 +21,11 @@ import torch
 from qdil.data import Rollout
 from qdil.devices import DEVICE_BACKENDS
 from qdil.envs.vector import LocomotionVectorEnv
+from qdil.executors.base import Executor
 from qdil.executors.shards import MIN_ROWS, advance, payload_bytes, shard_bounds
 from qdil.executors.worker import CollectCall, EvaluateCall, Phase
 from qdil.rl.collect import EpisodeLog, PolicyData, RewardFn, RolloutSteps, finish_rollout
 from qdil.rl.episodes import Evaluation, Played, score
-from qdil.rl.execution import Executor
 from qdil.rl.networks import VectorizedActor
 from qdil.rl.normalize import RunningMeanStd
 

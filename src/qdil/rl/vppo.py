@@ -44,9 +44,10 @@ import torch
 
 from qdil.data import Rollout
 from qdil.envs.vector import LocomotionVectorEnv
+from qdil.executors.base import Executor
+from qdil.executors.local import LocalExecutor
 from qdil.rl.collect import ActionMap, PolicyData
 from qdil.rl.episodes import Evaluation, EvaluationGroup
-from qdil.rl.execution import Executor, LocalExecutor
 from qdil.rl.networks import VectorizedActor, VectorizedCritic
 from qdil.rl.normalize import RunningMeanStd
 from qdil.rl.ppo import PPOSettings, ppo_update
