@@ -117,16 +117,7 @@ def test_ppo_update_moves_the_policy_towards_higher_advantage() -> None:
         rewards = pdata.actions[..., 0]
         ones = torch.ones_like(rewards)
         rollout = dataclasses.replace(rollout, dones=ones, terminated=ones)
-        algo._ppo_update(
-            actor,
-            optimizer,
-            algo.walk_critic,
-            algo.walk_critic_opt,
-            algo.walk_returns,
-            rollout,
-            pdata,
-            rewards,
-        )
+        algo._ppo_update("walk", actor, optimizer, rollout, pdata, rewards)
     with torch.no_grad():
         assert float(actor(obs)[0, 0, 0]) > before + 0.05
 

@@ -1,28 +1,14 @@
 """``TorchVectorEnv``: the torch face of a vector environment whose physics is on a device.
 
-:class:`~qdil.envs.vector.LocomotionVectorEnv` speaks gymnasium's numpy API, which copies
-every step's arrays to the host. On a device backend (``env.backend: warp``), RL steps this
-face of it instead (:class:`~qdil.envs.torch_step.TorchFace`): actions go in and
-observations, rewards, terminations, foot contacts and episode statistics come out as torch
-tensors on the physics' device, computed there by the same task formulas
-(:mod:`qdil.envs.arrays`), with no host copy and no host sync per step.
-
-Two things need the host and are kept off the per-step path:
-
-- **Reset noise** is drawn by each sub-environment's own numpy generator (gymnasium's
-  seeding, the same draws as the numpy face). The next ``reset_depth`` initial states of
-  every sub-environment wait on the device; an episode end takes the next one there, and
-  every ``reset_depth`` steps one host round trip tops the queues up. A sub-environment
-  ends at most one episode per step, so a queue never runs dry.
-- **Autoreset** (``SAME_STEP``) resets the finished worlds in place with
-  ``WarpBatch.reset_where``, which also runs ``forward``'s observed stages on the other
-  worlds (it leaves their states as they are): knowing whether any world finished would
-  cost a sync.
-
-Rollouts through this face equal those through the host face
-(:class:`~qdil.envs.faces.HostFace`) of the same environment from the same seeds:
-observations, foot contacts and episode ends exactly, rewards to float32 rounding of the
-control cost (``tests/rl/test_collect_device.py``).
+On a device backend (``env.backend: warp``) RL steps this face
+(:class:`~qdil.envs.torch_step.TorchFace`): the task formulas run on torch tensors on the
+physics' device (:mod:`qdil.envs.arrays`), with no host copy and no host sync per step.
+Two things need the host and stay off the per-step path: the reset noise, drawn by each
+sub-environment's numpy generator (gymnasium's seeding) ``reset_depth`` initial states
+ahead into queues on the device, and knowing whether any world finished, which the
+autoreset avoids by resetting the finished worlds in place (``WarpBatch.reset_where``).
+Rollouts through it equal those through the host face of the same environment
+(``tests/rl/test_collect_device.py``; ``docs/concepts/vppo.md``).
 """
 
 from __future__ import annotations
