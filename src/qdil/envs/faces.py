@@ -55,7 +55,7 @@ class HostFace:
             raise ValueError("a torch face supports autoreset_mode SAME_STEP and DISABLED")
         self.env = env
         self.num_envs, self.num_feet = env.num_envs, env.num_feet
-        self.device = env.device  # the CPU
+        self.device = torch.device("cpu")  # the numpy arrays are on the host, whatever the backend
         self.action_low = env.single_action_space.low
         self.action_high = env.single_action_space.high
         self.autoreset = env.autoreset_mode is AutoresetMode.SAME_STEP

@@ -22,7 +22,7 @@ import numpy as np
 import torch
 
 from qdil.data import Rollout
-from qdil.envs.torch_step import TorchFace, TorchStep
+from qdil.envs.torch_step import TorchFace
 from qdil.rl.networks import VectorizedActor
 from qdil.rl.normalize import RunningMeanStd
 from qdil.rl.sampler import PolicySampler
@@ -152,43 +152,37 @@ class Collector:
         if self._obs is None or self._contacts is None or self._starts is None:
             raise RuntimeError("call start() before collect()")
         obs, contacts = self._obs, self._contacts
-        # every step's tensors are new: kept in lists and stacked once (a write per step and
-        # buffer would cost more than the stacking)
-        seen: list[tuple[torch.Tensor, ...]] = []
-        steps: list[TorchStep] = []
+        # each step's tensors are new: kept (float32 observations, not the float64 ones) and
+        # stacked once, which costs less than writing each into a (T, N) buffer
+        kept: list[dict[str, torch.Tensor]] = []
         for _ in range(num_steps):
             norm, actions, log_probs = policy(obs)
             executed = self.action_map(actions)
             step = self.env.step(executed)
-            # s_{t+1} is the state the step reached, not the reset one
-            next_obs = step.final_obs.float()
-            seen.append((obs, contacts, executed, log_probs, norm, actions, next_obs))
-            steps.append(step)
+            next_obs = step.final_obs.float()  # s_{t+1} is the state reached, not the reset one
+            kept.append({
+                "obs": obs, "next_obs": next_obs, "actions": executed, "contacts": contacts,
+                "next_contacts": step.final_contacts, "rewards": step.reward, "dones": step.done,
+                "terminated": step.terminated, "log_probs": log_probs, "norm_obs": norm,
+                "policy_actions": actions, "episode_returns": step.episode_return,
+                "episode_lengths": step.episode_length,
+            })  # fmt: skip
             obs = next_obs if step.obs is step.final_obs else step.obs.float()
             contacts = step.contacts
-        stacked = [torch.stack(column) for column in zip(*seen, strict=True)]
-        obs_t, contacts_t, executed_t, log_probs_t, norm_t, actions_t, next_obs_t = stacked
-
-        def stack(field: str) -> torch.Tensor:
-            return torch.stack([getattr(step, field) for step in steps])
-
-        dones = stack("done").float()
+        t = {key: torch.stack([kept_step[key] for kept_step in kept]) for key in kept[0]}
+        dones = t["dones"].float()
         buffers = {
-            "obs": obs_t,
-            "next_obs": next_obs_t,
-            "actions": executed_t,
-            "contacts": contacts_t,
-            "next_contacts": stack("final_contacts"),
-            "rewards": stack("reward").float(),
+            **{key: t[key] for key in ("obs", "next_obs", "actions", "contacts", "next_contacts")},
+            "rewards": t["rewards"].float(),
             "dones": dones,
-            "terminated": stack("terminated").float(),
-            "log_probs": log_probs_t,
+            "terminated": t["terminated"].float(),
+            "log_probs": t["log_probs"],
             "starts": torch.cat([self._starts[None], dones[:-1]]),
         }
         # where the next call goes on
         self._obs, self._contacts, self._starts = obs, contacts, dones[-1]
         return RolloutSteps(
-            buffers, norm_t, actions_t, stack("episode_return"), stack("episode_length")
+            buffers, t["norm_obs"], t["policy_actions"], t["episode_returns"], t["episode_lengths"]
         )
 
     def pop_episode_stats(self) -> tuple[list[float], list[int]]:
