@@ -153,11 +153,12 @@ class EpisodePlayer:
         """One env step of the running slots, actions chosen by ``policy``."""
         used = self.used
         _, actions, log_probs = policy(self.obs)
-        executed = self.action_map(actions)
-        if used < self.env.num_envs:
+        executed = all_actions = self.action_map(actions)
+        if used < self.env.num_envs:  # the slots that do not play sit out with zero actions
             self._actions[:used] = executed
+            all_actions = self._actions
         active = self.running
-        step = self.env.step(self._actions if used < self.env.num_envs else executed, active)
+        step = self.env.step(all_actions, active)
         done = step.done
         self.running = active & ~done
         self.active.append(active)
