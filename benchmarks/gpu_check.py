@@ -179,7 +179,7 @@ def step_breakdown(device: str, n: int, repeats: int) -> dict[str, Any]:
 
     from qdil.envs.torch_vector import TorchVectorEnv
     from qdil.envs.vector import LocomotionVectorEnv
-    from qdil.rl.collect_device import DeviceCollector
+    from qdil.rl.collect import Collector
     from qdil.rl.networks import VectorizedActor
     from qdil.rl.normalize import RunningMeanStd
 
@@ -226,7 +226,7 @@ def step_breakdown(device: str, n: int, repeats: int) -> dict[str, Any]:
     result["ms"]["face_step"] = 1e3 * (time.perf_counter() - start) / repeats
     result["torch_ops"] = {"face_step": torch_ops(lambda: face.step(actions))}
 
-    collector = DeviceCollector(env, reset_depth=face.reset_depth)
+    collector = Collector(TorchVectorEnv(env, reset_depth=face.reset_depth))
     obs_dim = env.single_observation_space.shape[0]
     actor = VectorizedActor(3, obs_dim, dim).to(face.device)
     stats = RunningMeanStd(3, (obs_dim,), device=face.device)

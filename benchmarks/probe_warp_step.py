@@ -59,7 +59,7 @@ def main() -> None:
     frame_skip = env.task.frame_skip
 
     def sync() -> None:
-        wp.synchronize_device(physics.device)
+        wp.synchronize_device(physics.warp_device)
 
     env.reset(seed=0)
     rng = np.random.default_rng(0)

@@ -4,9 +4,9 @@ Each recipe stays one self-contained YAML file (no inheritance); this script onl
 ~70 files consistent. Edit the tables, run ``python recipes/generate.py``, commit the files.
 ``tests/test_recipes.py`` fails when a file differs from what this script writes.
 
-Paper values: the seed paper's hyperparameter tables and PPGA's per-task runner scripts
-(reference/ppga_qdil.md §3, §4.9). Laptop values: reduced to about one hour on 2 CPU
-cores; the reductions are listed in each file's header.
+Paper values: the seed paper's hyperparameter tables and PPGA's per-task runner scripts.
+Laptop values: reduced to about one hour on 2 CPU cores; the reductions are listed in each
+file's header.
 """
 
 from __future__ import annotations

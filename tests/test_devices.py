@@ -15,7 +15,6 @@ from run_devices import build, off_device, run_tensors
 from qdil.cli import main
 from qdil.devices import fabric_settings, run_device
 from qdil.envs.vector import LocomotionVectorEnv
-from qdil.rl.execution import DeviceExecutor, LocalExecutor
 from qdil.rl.vppo import VPPO
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -56,10 +55,15 @@ def test_fit_refuses_cuda_on_the_mujoco_backend_before_building(tmp_path, monkey
 
 
 def test_policies_on_another_device_than_the_physics_are_refused() -> None:
+    """VPPO takes the physics' device; environments on two devices are refused."""
     train = LocomotionVectorEnv("Walker2d-v5", 3, autoreset_mode="SameStep")
     evaluation = LocomotionVectorEnv("Walker2d-v5", 3, autoreset_mode="Disabled")
-    with pytest.raises(ValueError, match=r"env\.device: the physics steps on cpu"):
-        VPPO().setup(train, evaluation, 0, device="meta")
+    algo = VPPO()
+    algo.setup(train, evaluation, 0)
+    assert algo.device == train.device == torch.device("cpu")
+    evaluation.device = torch.device("meta")
+    with pytest.raises(ValueError, match=r"env\.device: the training physics steps on cpu"):
+        VPPO().setup(train, evaluation, 0)
 
 
 def test_every_tensor_of_a_run_is_on_its_device(tmp_path, walker_demos) -> None:
@@ -86,10 +90,12 @@ def test_a_recipe_on_a_device_backend_steps_through_the_torch_face(tmp_path) -> 
     with policies on the GPU and failed at the first action (first run on an H200).
     """
     pytest.importorskip("mujoco_warp", reason="the warp extra is not installed")
-    from qdil.rl.collect_device import DeviceCollector
+    from qdil.envs.faces import HostFace
+    from qdil.envs.torch_vector import TorchVectorEnv
 
     on_warp = build(SMOKE, tmp_path / "warp", "--env.backend", "warp")
-    assert type(on_warp.vppo.executor) is DeviceExecutor
-    assert isinstance(on_warp.vppo.executor.collector, DeviceCollector)
+    assert isinstance(on_warp.vppo.executor.collector.env, TorchVectorEnv)
+    assert isinstance(on_warp.vppo.executor.eval_face, TorchVectorEnv)
     on_c = build(SMOKE, tmp_path / "c")
-    assert type(on_c.vppo.executor) is LocalExecutor
+    assert isinstance(on_c.vppo.executor.collector.env, HostFace)
+    assert isinstance(on_c.vppo.executor.eval_face, HostFace)

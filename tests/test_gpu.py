@@ -29,7 +29,7 @@ pytestmark = [
 pytest.importorskip("mujoco_warp", reason="the warp extra is not installed")
 
 from qdil.cli import main  # noqa: E402
-from qdil.rl.collect_device import DeviceCollector  # noqa: E402
+from qdil.envs.torch_vector import TorchVectorEnv  # noqa: E402
 from qdil.rl.normalize import RunningMeanStd  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -60,7 +60,7 @@ def test_every_tensor_of_a_run_is_on_the_gpu(tmp_path: Path, walker_demos) -> No
     assert off_device(run, torch.device("cuda")) == []
     assert run.fabric.device.type == "cuda"
     assert run.env.physics.torch_exported.device.type == "cuda"
-    assert isinstance(run.vppo.executor.collector, DeviceCollector)
+    assert isinstance(run.vppo.executor.collector.env, TorchVectorEnv)
 
 
 def test_a_rollout_does_not_sync_with_the_host_per_step(tmp_path: Path) -> None:
@@ -69,7 +69,7 @@ def test_a_rollout_does_not_sync_with_the_host_per_step(tmp_path: Path) -> None:
     actor = vppo._actor(vppo.initial_solution(0)[None].repeat(vppo.num_objectives, 0))
     stats = RunningMeanStd(vppo.num_objectives, (vppo.obs_dim,), device="cuda")
     collector.start(seed=0)
-    steps, depth = 64, collector.torch_env.reset_depth
+    steps, depth = 64, collector.env.reset_depth
     torch.cuda.synchronize()
     torch.cuda.set_sync_debug_mode("warn")  # torch warns at every synchronising call
     try:

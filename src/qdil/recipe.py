@@ -50,6 +50,22 @@ MINIMUMS: dict[str, float] = {
 # Keys whose value is a class (``class_path`` + ``init_args``, or a dotted path).
 CLASS_KEYS = ("reward", "rl", "qd.emitter", "qd.scheduler", "executor")
 
+MOVED_CLASSES = {"qdil.rl.execution.LocalExecutor": "qdil.executors.LocalExecutor"}
+"""Class paths that the recipes of older runs store, and where those classes are now."""
+
+
+def moved_classes(value: Any) -> Any:
+    """A recipe's content with the class paths of :data:`MOVED_CLASSES` replaced.
+
+    A run directory keeps its resolved recipe, with the class path of every section; one
+    written before a class moved still resumes.
+    """
+    if isinstance(value, dict):
+        return {key: moved_classes(item) for key, item in value.items()}
+    if isinstance(value, list):
+        return [moved_classes(item) for item in value]
+    return MOVED_CLASSES.get(value, value) if isinstance(value, str) else value
+
 
 def recipe(
     reward: RewardFactory,

@@ -12,15 +12,15 @@ from ribs.schedulers import Scheduler
 
 from qdil.config import BonusConfig, DemoConfig, EnvConfig, LoggingConfig, QDConfig, RewardFactory
 from qdil.demos.io import load_demos
-from qdil.devices import fabric_settings, run_device
+from qdil.devices import DEVICE_BACKENDS, fabric_settings
 from qdil.envs.vector import LocomotionVectorEnv
+from qdil.executors.base import Executor
 from qdil.qd.archives import RunArchives, deployable_fields, elite_fields, make_grid
 from qdil.qd.emitter import PPGAEmitter
 from qdil.qd.state import LoopState, Run
 from qdil.rewards.base import RewardModel
 from qdil.rewards.bonus import ExplorationBonus
 from qdil.rewards.ebc import EBCBonus
-from qdil.rl.execution import Executor
 from qdil.rl.networks import VectorizedActor
 from qdil.rl.normalize import RunningMeanStd
 from qdil.rl.vppo import VPPO
@@ -79,7 +79,6 @@ def build_run(
         ValueError: for inconsistent settings, naming the recipe key (``env.device`` for
             a device the run cannot use).
     """
-    device = run_device(env.backend, env.device)
     _, vppo_seed, emitter_seed, archive_seed, loop_seed, torch_seed, x0_seed = _seeds(seed, 7)
     torch.manual_seed(torch_seed)
 
@@ -94,6 +93,7 @@ def build_run(
         device=env.device,
         **env.task_kwargs,
     )
+    device = train_env.device  # checked with env.backend before anything was built
     obs_dim = train_env.single_observation_space.shape[0]
     action_dim = train_env.single_action_space.shape[0]
     k = train_env.num_feet
@@ -150,7 +150,7 @@ def build_run(
     branch_slots = emitter.batch_size * qd.branch_episodes
     # a device scores θ_μ and the branches side by side (fewer steps in sequence); the
     # C engine plays them one after the other, so its environment fits the larger one
-    on_device = env.backend != "mujoco"
+    on_device = env.backend in DEVICE_BACKENDS
     together, larger = branch_slots + qd.mean_episodes, max(branch_slots, qd.mean_episodes)
     eval_size = env.eval_envs or (together if on_device else larger)
     eval_env = LocomotionVectorEnv(
@@ -160,10 +160,10 @@ def build_run(
         autoreset_mode="Disabled",
         num_threads=env.num_threads,
         backend=env.backend,
-        device=env.device,
+        device=device,
         **env.task_kwargs,
     )
-    rl.setup(train_env, eval_env, vppo_seed, device, executor)
+    rl.setup(train_env, eval_env, vppo_seed, executor)
 
     # ---- reward model, driven by Lightning Fabric; the bonus wraps it afterwards
     model = reward(obs_dim, action_dim, k)

@@ -128,3 +128,17 @@ def test_bad_checkpoints_are_reported_with_the_file(tmp_path: Path) -> None:
     assert result.returncode != 0
     assert f"{checkpoint} is not a readable qdil checkpoint" in result.stderr
     assert "Traceback" not in result.stderr
+
+
+def test_a_recipe_of_an_older_run_with_a_moved_class_still_parses(tmp_path: Path) -> None:
+    """Run directories written before the executors moved name the old class path."""
+    import yaml
+
+    from qdil.cli.fit import fit_parser, parse_fit
+    from qdil.executors import LocalExecutor
+
+    recipe = yaml.safe_load(SMOKE.read_text())
+    recipe["executor"] = {"class_path": "qdil.rl.execution.LocalExecutor"}
+    (tmp_path / "old.yaml").write_text(yaml.safe_dump(recipe))
+    config, _, _ = parse_fit([str(tmp_path / "old.yaml")])
+    assert isinstance(fit_parser().instantiate(config).executor, LocalExecutor)

@@ -116,6 +116,7 @@ def test_the_gif_reads_back_with_a_frame_every_stride_steps_and_the_last(
 
 def test_rendering_leaves_the_episodes_return_as_it_is(run_dir: Path, gl: str, tmp_path: Path):
     """The return drawn equals that of qdil eval's replay of the same elite and seed."""
+    from qdil.envs.faces import torch_face
     from qdil.evaluation.rescore import ReplaySettings, elite_policies
     from qdil.evaluation.video import render_elites
     from qdil.rl.episodes import evaluate_policies
@@ -128,7 +129,8 @@ def test_rendering_leaves_the_episodes_return_as_it_is(run_dir: Path, gl: str, t
     settings = ReplaySettings.of_run(run_dir)
     env = settings.make_env(1, num_threads=1, max_episode_steps=STEPS)
     actor, stats = elite_policies(data, np.array([row]), env, settings.actor_hidden)
-    plain = evaluate_policies(env, actor, stats, 1, 3, None, True, settings.obs_clip)
+    face = torch_face(env)
+    plain = evaluate_policies(face, actor, stats, 1, 3, None, True, settings.obs_clip)
     assert video.episode_return == plain.true_objective[0]
     assert video.steps == plain.lengths[0]
     np.testing.assert_array_equal(video.measures, plain.measures[0])

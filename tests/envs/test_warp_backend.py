@@ -24,7 +24,6 @@ import torch
 pytest.importorskip("mujoco_warp", reason="the warp extra is not installed")
 
 from qdil.cli import main
-from qdil.envs.backends import make_physics
 from qdil.envs.vector import LocomotionVectorEnv
 
 SMOKE = Path(__file__).resolve().parents[2] / "recipes" / "smoke" / "walker_true.yaml"
@@ -109,16 +108,13 @@ def test_masked_out_worlds_keep_their_state(pair) -> None:
 
 
 def test_bad_backend_or_device_is_refused_with_the_setting_named() -> None:
-    import mujoco
-
-    model = mujoco.MjModel.from_xml_string("<mujoco><worldbody/></mujoco>")
-    kwargs = dict(rne_post_constraint=False, num_threads=None)
+    """The environment's constructor checks the pair once (qdil.devices.run_device)."""
     with pytest.raises(ValueError, match=r"env\.backend"):
-        make_physics("brax", model, 1, {}, device="cpu", **kwargs)
+        LocomotionVectorEnv("Walker2d-v5", 1, backend="brax", device="cpu")
     with pytest.raises(ValueError, match=r"env\.device"):
-        make_physics("mujoco", model, 1, {}, device="cuda", **kwargs)
+        LocomotionVectorEnv("Walker2d-v5", 1, backend="mujoco", device="cuda")
     with pytest.raises(ValueError, match=r"env\.device"):
-        make_physics("warp", model, 1, {}, device="tpu", **kwargs)
+        LocomotionVectorEnv("Walker2d-v5", 1, backend="warp", device="tpu")
 
 
 def test_humanoid_needs_the_newton_variant_on_warp() -> None:

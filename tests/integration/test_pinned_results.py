@@ -28,6 +28,7 @@ import torch
 
 from qdil import numerics
 from qdil.cli import main
+from qdil.envs.faces import torch_face
 from qdil.envs.vector import LocomotionVectorEnv
 from qdil.rl.collect import Collector
 from qdil.rl.episodes import evaluate_policies
@@ -126,7 +127,7 @@ def fitted_stats(num: int) -> RunningMeanStd:
 
 def test_training_rollouts_are_pinned() -> None:
     env = LocomotionVectorEnv("Walker2d-v5", 6, max_episode_steps=30, autoreset_mode="SameStep")
-    collector = Collector(env)
+    collector = Collector(torch_face(env))
     collector.start(seed=11)
     actor = VectorizedActor(3, 17, 6)
     actor.set_solutions(policies(3, seed=1))
@@ -153,11 +154,12 @@ def test_evaluations_are_pinned(deterministic: bool) -> None:
         recorded.append(vars(rollout))
         return 2.0 * rollout.rewards + rollout.next_contacts.sum(-1)
 
+    face = torch_face(env)
     evaluation = evaluate_policies(
-        env, actor, fitted_stats(2), 2, 4, reward_fn, deterministic, generator=generator
+        face, actor, fitted_stats(2), 2, 4, reward_fn, deterministic, generator=generator
     )
     plain = evaluate_policies(
-        env, actor, fitted_stats(2), 2, 4, None, deterministic, 10.0, generator
+        face, actor, fitted_stats(2), 2, 4, None, deterministic, 10.0, generator
     )
     check(f"evaluation_{deterministic}", digest(vars(evaluation), recorded, vars(plain)))
 

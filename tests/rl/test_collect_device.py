@@ -15,11 +15,11 @@ import torch
 
 pytest.importorskip("mujoco_warp", reason="the warp extra is not installed")
 
+from qdil.envs.faces import HostFace
 from qdil.envs.torch_vector import TorchVectorEnv
 from qdil.envs.vector import LocomotionVectorEnv
 from qdil.rl.collect import Collector
-from qdil.rl.collect_device import DeviceCollector, evaluate_on_device
-from qdil.rl.episodes import evaluate_policies
+from qdil.rl.episodes import EvaluationGroup, evaluate_groups, evaluate_policies
 from qdil.rl.networks import VectorizedActor
 from qdil.rl.normalize import RunningMeanStd
 
@@ -50,7 +50,7 @@ def test_training_rollouts_equal_the_numpy_path() -> None:
     env = _env("SameStep")
     actor, stats = _policies(3)
     results = []
-    for collector in (Collector(env), DeviceCollector(env, reset_depth=3)):
+    for collector in (Collector(HostFace(env)), Collector(TorchVectorEnv(env, reset_depth=3))):
         collector.start(seed=7)
         generator = torch.Generator().manual_seed(0)
         rollouts = [
@@ -77,12 +77,10 @@ def test_evaluations_equal_the_numpy_path() -> None:
         return rollout.next_obs[..., 0] - rollout.actions.square().sum(-1)
 
     numpy_eval = evaluate_policies(
-        env, actor, stats, 3, seed=4, reward_fn=reward_fn, generator=torch.Generator()
+        HostFace(env), actor, stats, 3, seed=4, reward_fn=reward_fn, generator=torch.Generator()
     )
-    device_eval = evaluate_on_device(
-        TorchVectorEnv(env), actor, stats, 3, seed=4, reward_fn=reward_fn,
-        generator=torch.Generator(), sync_every=4,
-    )  # fmt: skip
+    group = EvaluationGroup(actor, stats, 3, 4, torch.Generator())
+    device_eval = evaluate_groups(TorchVectorEnv(env), [group], reward_fn, sync_every=4)[0]
     assert device_eval.env_steps == numpy_eval.env_steps
     np.testing.assert_array_equal(device_eval.lengths, numpy_eval.lengths)
     np.testing.assert_array_equal(device_eval.measures, numpy_eval.measures)
@@ -118,7 +116,7 @@ def test_autoresets_without_the_solver_change_no_bit(task: str, monkeypatch) -> 
         actor.set_solutions(
             np.stack([actor.initial_solution(obs_dim, action_dim, seed=s) for s in range(2)]) * 30
         )
-        collector = DeviceCollector(env, reset_depth=2)
+        collector = Collector(TorchVectorEnv(env, reset_depth=2))
         collector.start(seed=3)
         rollout, _ = collector.collect(
             actor, RunningMeanStd(2, (obs_dim,)), 8, torch.Generator().manual_seed(1), False
@@ -146,8 +144,6 @@ def test_groups_played_side_by_side_equal_their_own_evaluations() -> None:
     Stochastic actions (each group's own generator), a learned-reward objective, and
     groups of different sizes, statistics and episode counts.
     """
-    from qdil.rl.collect_device import evaluate_groups_on_device
-    from qdil.rl.episodes import EvaluationGroup
 
     def reward_fn(rollout):
         return rollout.next_obs[..., 0] - rollout.actions.square().sum(-1)
@@ -164,12 +160,8 @@ def test_groups_played_side_by_side_equal_their_own_evaluations() -> None:
         ]
 
     env = TorchVectorEnv(_env("Disabled", 12))
-    batched = evaluate_groups_on_device(env, groups(), reward_fn, sync_every=4)
-    alone = [
-        evaluate_on_device(env, g.actor, g.stats, g.episodes, g.seed, reward_fn,
-                           generator=g.generator, sync_every=4)
-        for g in groups()
-    ]  # fmt: skip
+    batched = evaluate_groups(env, groups(), reward_fn, sync_every=4)
+    alone = [evaluate_groups(env, [g], reward_fn, sync_every=4)[0] for g in groups()]
     for a, b in zip(batched, alone, strict=True):
         assert a.env_steps == b.env_steps
         for field in ("objective", "true_objective", "measures", "lengths", "true_std"):

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import torch
 
+from qdil.envs.faces import torch_face
 from qdil.envs.vector import LocomotionVectorEnv
 from qdil.rl.collect import Collector
 from qdil.rl.networks import VectorizedActor
@@ -73,7 +74,7 @@ def test_evaluation_of_recorded_true_rewards_equals_the_true_return(vppo) -> Non
 
 def test_collector_aligns_contacts_with_observations() -> None:
     env = LocomotionVectorEnv("Hopper-v5", 4, max_episode_steps=30, autoreset_mode="SameStep")
-    collector = Collector(env)
+    collector = Collector(torch_face(env))
     collector.start(seed=0)
     actor = VectorizedActor(2, 11, 3)
     actor.set_solutions(np.stack([VectorizedActor.initial_solution(11, 3, seed=s) for s in (0, 1)]))
@@ -116,16 +117,7 @@ def test_ppo_update_moves_the_policy_towards_higher_advantage() -> None:
         rewards = pdata.actions[..., 0]
         ones = torch.ones_like(rewards)
         rollout = dataclasses.replace(rollout, dones=ones, terminated=ones)
-        algo._ppo_update(
-            actor,
-            optimizer,
-            algo.walk_critic,
-            algo.walk_critic_opt,
-            algo.walk_returns,
-            rollout,
-            pdata,
-            rewards,
-        )
+        algo._ppo_update("walk", actor, optimizer, rollout, pdata, rewards)
     with torch.no_grad():
         assert float(actor(obs)[0, 0, 0]) > before + 0.05
 
@@ -146,7 +138,7 @@ def test_next_state_values_equal_a_second_critic_pass_bit_for_bit(update_stats: 
     from qdil.rl.ppo import next_state_values, to_policies
 
     env = LocomotionVectorEnv("Hopper-v5", 6, max_episode_steps=30, autoreset_mode="SameStep")
-    collector = Collector(env)
+    collector = Collector(torch_face(env))
     collector.start(seed=3)
     actor = VectorizedActor(3, 11, 3)
     actor.set_solutions(

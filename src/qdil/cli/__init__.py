@@ -46,7 +46,7 @@ def _is_user_error(error: BaseException) -> bool:
     checkpoint = sys.modules.get("qdil.qd.checkpoint")
     if checkpoint is not None and isinstance(error, checkpoint.CheckpointError):
         return True
-    executors = sys.modules.get("qdil.rl.execution")  # e.g. an unreachable Ray cluster
+    executors = sys.modules.get("qdil.executors.base")  # e.g. an unreachable Ray cluster
     if executors is not None and isinstance(error, executors.ExecutorError):
         return True
     gl = sys.modules.get("qdil.evaluation.gl")  # no OpenGL: the message names the packages

@@ -154,7 +154,7 @@ def parse_fit(argv: list[str]) -> tuple[Namespace, Path | None, str]:
     """
     import yaml
 
-    from qdil.recipe import check_values, class_path_problem
+    from qdil.recipe import check_values, class_path_problem, moved_classes
     from qdil.rewards import discover
 
     discover()
@@ -188,6 +188,7 @@ def parse_fit(argv: list[str]) -> tuple[Namespace, Path | None, str]:
         raise SystemExit(f"recipe {base} cannot be read: {error}") from None
     if not isinstance(content, dict):
         raise SystemExit(f"recipe {base} must be a mapping of sections (env, reward, rl, qd, ...)")
+    content = moved_classes(content)
     try:
         content = _resolve_reward_names(content)
         overrides = _rewrite_reward_flag(overrides)
@@ -215,6 +216,7 @@ def fit(argv: list[str]) -> None:
         fit_help(help_request)
     import yaml
 
+    from qdil.executors.base import ExecutorError
     from qdil.files import atomic_write, remove_stale_temporaries
     from qdil.provenance import record_start
     from qdil.qd.checkpoint import (
@@ -225,7 +227,6 @@ def fit(argv: list[str]) -> None:
     )
     from qdil.qd.loop import run_qd
     from qdil.rewards.base import NonFiniteRewardError
-    from qdil.rl.execution import ExecutorError
     from qdil.tracking import check_wandb_login
 
     config, resume_dir, stem = parse_fit(argv)

@@ -13,11 +13,10 @@ from __future__ import annotations
 from typing import Any
 
 import mujoco
+import torch
 
+from qdil.devices import BACKENDS
 from qdil.envs.physics import Export, MujocoBatch
-
-BACKENDS = ("mujoco", "warp")
-"""Values of ``env.backend``."""
 
 
 def make_physics(
@@ -28,20 +27,13 @@ def make_physics(
     *,
     rne_post_constraint: bool,
     num_threads: int | None,
-    device: str,
+    device: torch.device,
 ) -> Any:
-    """The batch of ``num_sims`` simulations of ``model`` on ``backend``.
+    """The batch of ``num_sims`` simulations of ``model`` on ``backend`` and ``device``.
 
-    Raises:
-        ValueError: naming ``env.backend`` or ``env.device`` when either is unknown, or the
-            ``mujoco`` backend is asked to run on a GPU.
+    The pair was checked by :func:`qdil.devices.run_device` (the environment's constructor).
     """
-    if backend == "mujoco":
-        if device != "cpu":
-            raise ValueError(
-                f"env.device: {device!r} needs env.backend: warp; the mujoco backend runs on "
-                "the CPU (env.device: cpu)"
-            )
+    if backend == "mujoco":  # the CPU
         return MujocoBatch(
             model,
             num_sims,

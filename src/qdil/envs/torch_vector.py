@@ -1,76 +1,25 @@
 """``TorchVectorEnv``: the torch face of a vector environment whose physics is on a device.
 
-:class:`~qdil.envs.vector.LocomotionVectorEnv` speaks gymnasium's numpy API, which copies
-every step's arrays to the host. On a device backend (``env.backend: warp``), rollouts use
-this face instead: actions go in and observations, rewards, terminations, foot contacts and
-episode statistics come out as torch tensors on the physics' device, computed there by the
-same task formulas (:mod:`qdil.envs.arrays`), with no host copy and no host sync per step.
-
-Two things need the host and are kept off the per-step path:
-
-- **Reset noise** is drawn by each sub-environment's own numpy generator (gymnasium's
-  seeding, the same draws as the numpy face). The next ``reset_depth`` initial states of
-  every sub-environment wait on the device; an episode end takes the next one there, and
-  every ``reset_depth`` steps one host round trip tops the queues up. A sub-environment
-  ends at most one episode per step, so a queue never runs dry.
-- **Autoreset** (``SAME_STEP``) resets the finished worlds in place with
-  ``WarpBatch.reset_where``, which also runs ``forward``'s observed stages on the other
-  worlds (it leaves their states as they are): knowing whether any world finished would
-  cost a sync.
-
-Rollouts through this face equal those through the numpy face from the same seeds:
-observations, foot contacts and episode ends exactly, rewards to float32 rounding of the
-control cost (``tests/rl/test_collect_device.py``).
+On a device backend (``env.backend: warp``) RL steps this face
+(:class:`~qdil.envs.torch_step.TorchFace`): the task formulas run on torch tensors on the
+physics' device (:mod:`qdil.envs.arrays`), with no host copy and no host sync per step.
+Two things need the host and stay off the per-step path: the reset noise, drawn by each
+sub-environment's numpy generator (gymnasium's seeding) ``reset_depth`` initial states
+ahead into queues on the device, and knowing whether any world finished, which the
+autoreset avoids by resetting the finished worlds in place (``WarpBatch.reset_where``).
+Rollouts through it equal those through the host face of the same environment
+(``tests/rl/test_collect_device.py``; ``docs/concepts/vppo.md``).
 """
 
 from __future__ import annotations
-
-from dataclasses import dataclass
 
 import numpy as np
 import torch
 from gymnasium.vector import AutoresetMode
 
+from qdil.devices import DEVICE_BACKENDS
+from qdil.envs.torch_step import TorchStep
 from qdil.envs.vector import LocomotionVectorEnv
-
-
-@dataclass(frozen=True)
-class TorchStep:
-    """One env step of N sub-environments, (N, ...) tensors on the physics' device.
-
-    Attributes:
-        obs: float64 observations to act on next (after an autoreset, the new episode's).
-        final_obs: float64 observations of the states the step reached (before a reset).
-        reward: float64 true rewards (0 for sub-environments left out of the step).
-        terminated: bool, the episode ended because the robot is unhealthy.
-        truncated: bool, the episode reached ``max_episode_steps``.
-        contacts: float32 0/1 foot-contact flags of ``obs``'s states.
-        final_contacts: float32 foot-contact flags of ``final_obs``'s states.
-        episode_return: float64 true return of the episodes that ended (0 elsewhere).
-        episode_length: int64 lengths of the episodes that ended (0 elsewhere).
-        episode_measures: (N, k) float64 mean foot contacts of the episodes that ended.
-    """
-
-    obs: torch.Tensor
-    final_obs: torch.Tensor
-    reward: torch.Tensor
-    terminated: torch.Tensor
-    truncated: torch.Tensor
-    contacts: torch.Tensor
-    final_contacts: torch.Tensor
-    episode_return: torch.Tensor
-    episode_length: torch.Tensor
-    episode_measures: torch.Tensor
-
-    @property
-    def done(self) -> torch.Tensor:
-        """(N,) bool, terminated or truncated."""
-        return self.terminated | self.truncated
-
-
-def has_torch_face(env: LocomotionVectorEnv) -> bool:
-    """Whether ``env``'s physics steps from torch tensors on its device (the warp backend)."""
-    return hasattr(env.physics, "step_torch")
 
 
 class TorchVectorEnv:
@@ -86,22 +35,27 @@ class TorchVectorEnv:
             are topped up from the host every ``reset_depth`` steps.
 
     Raises:
-        ValueError: for a backend without a torch face, naming ``env.backend``, or the
-            ``NEXT_STEP`` autoreset mode.
+        ValueError: for a backend whose arrays are on the host, naming ``env.backend``, or
+            the ``NEXT_STEP`` autoreset mode.
     """
 
+    side_by_side = True
+    sync_every = 16
+
     def __init__(self, env: LocomotionVectorEnv, reset_depth: int = 16) -> None:
-        if not has_torch_face(env):
+        if env.backend not in DEVICE_BACKENDS:
             raise ValueError(
-                f"env.backend: {env.backend} hands numpy arrays to the host; the torch face "
+                f"env.backend: {env.backend} hands numpy arrays to the host; the device face "
                 "needs a device backend (env.backend: warp)"
             )
         if env.autoreset_mode is AutoresetMode.NEXT_STEP:
-            raise ValueError("the torch face supports autoreset_mode SAME_STEP and DISABLED")
+            raise ValueError("a torch face supports autoreset_mode SAME_STEP and DISABLED")
         if reset_depth < 1:
             raise ValueError(f"reset_depth must be at least 1, got {reset_depth}")
         self.env, self.task, self.physics = env, env.task, env.physics
-        self.device: torch.device = env.physics.torch_device
+        self.device = env.device
+        self.action_low = env.single_action_space.low
+        self.action_high = env.single_action_space.high
         self.num_envs = n = env.num_envs
         self.num_feet = k = env.num_feet
         self.autoreset = env.autoreset_mode is AutoresetMode.SAME_STEP
@@ -157,6 +111,15 @@ class TorchVectorEnv:
         if self.device.type != "cuda":
             return tensor.to(self.device)
         return tensor.pin_memory().to(self.device, non_blocking=True)
+
+    def episode_statistics(self) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """(N,) return, (N,) length and (N, k) measures of each current or last episode.
+
+        With autoreset disabled a finished sub-environment keeps them until it is reset:
+        they are what the step that ended its episode reported.
+        """
+        length = self._elapsed.clamp(min=1)
+        return self._return, self._elapsed, self._contact_sum / length[:, None]
 
     def _start_episodes(self, mask: torch.Tensor) -> None:
         """Zero the episode statistics where ``mask`` (N,) holds, after a physics reset."""
@@ -257,6 +220,7 @@ class TorchVectorEnv:
             reward=reward,
             terminated=terminated,
             truncated=truncated,
+            done=done,
             contacts=contacts,
             final_contacts=final_contacts,
             episode_return=episode_return,

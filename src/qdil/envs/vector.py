@@ -25,10 +25,12 @@ from typing import Any
 import gymnasium
 import mujoco
 import numpy as np
+import torch
 from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
+from qdil.devices import run_device
 from qdil.envs.backends import make_physics
 from qdil.envs.physics import add_contact_sensors
 from qdil.envs.rendering import CAMERA_DISTANCE, RENDER_MODES, StateRenderer
@@ -51,18 +53,22 @@ class LocomotionVectorEnv(VectorEnv):
         num_threads: physics threads; ``None`` uses every available core.
         backend: physics engine, ``"mujoco"`` (MuJoCo's C engine, :class:`MujocoBatch`) or
             ``"warp"`` (MuJoCo Warp, :class:`~qdil.envs.warp_physics.WarpBatch`).
-        device: Warp device of the ``warp`` backend, ``"cpu"`` or ``"cuda[:N]"``; the
-            ``mujoco`` backend runs on the CPU only.
+        device: where the physics runs, ``"cpu"`` or ``"cuda[:N]"`` (``warp`` only);
+            checked here with ``backend`` (:func:`qdil.devices.run_device`), before
+            anything is built.
         render_mode: ``"rgb_array"``: :meth:`render` draws the first simulation
             (:mod:`qdil.envs.rendering`); ``None``: no rendering.
         **task_kwargs: gymnasium's keyword arguments of the task, e.g. ``ctrl_cost_weight``.
 
     Attributes:
+        device: the ``torch.device`` of the physics, which everything stepping it uses.
         factory: a picklable maker of the same task, horizon and backend, called as
             ``factory(num_envs, autoreset_mode=..., num_threads=...)``.
 
     Raises:
-        ValueError: for an unknown task, keyword, autoreset or render mode, or a bad size.
+        ValueError: for an unknown task, keyword, autoreset or render mode, a bad size, or
+            a backend and device that do not go together (naming ``env.backend`` or
+            ``env.device``).
     """
 
     def __init__(
@@ -73,10 +79,11 @@ class LocomotionVectorEnv(VectorEnv):
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         num_threads: int | None = None,
         backend: str = "mujoco",
-        device: str = "cpu",
+        device: str | torch.device = "cpu",
         render_mode: str | None = None,
         **task_kwargs: Any,
     ) -> None:
+        self.backend, self.device = backend, run_device(backend, device)
         # how to build this task again elsewhere (a remote worker's shard): by name, so that
         # a worker finds the model files of its own installation
         self.factory = partial(
@@ -84,7 +91,7 @@ class LocomotionVectorEnv(VectorEnv):
             task,
             max_episode_steps=max_episode_steps,
             backend=backend,
-            device=device,
+            device=self.device,
             **task_kwargs,
         )
         if isinstance(task, str):
@@ -117,7 +124,6 @@ class LocomotionVectorEnv(VectorEnv):
         reference = mujoco.MjData(self.model)
         task.bind(self.model, reference.qpos.ravel().copy(), reference.qvel.ravel().copy())
         self.metadata["render_fps"] = round(1 / task.dt)  # real time, as gymnasium's envs
-        self.backend, self.device = backend, device
         self.physics = make_physics(
             backend,
             self.model,
@@ -125,7 +131,7 @@ class LocomotionVectorEnv(VectorEnv):
             task.exports(self.model),
             rne_post_constraint=task.needs_rne,
             num_threads=num_threads,
-            device=device,
+            device=self.device,
         )
         self._names = list(task.exports(self.model))
 
@@ -177,6 +183,15 @@ class LocomotionVectorEnv(VectorEnv):
     def seed_generators(self, seed: int | list[int | None] | None) -> None:
         """Seed the reset-noise generators as :meth:`reset` does (``None`` keeps them)."""
         self._seed(seed)
+
+    def episode_statistics(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(N,) return, (N,) length and (N, k) measures of each current or last episode.
+
+        With autoreset disabled a finished sub-environment keeps them until it is reset:
+        they are what ``info["episode"]`` reported when its episode ended.
+        """
+        length = np.maximum(self._elapsed, 1)
+        return self._return.copy(), self._elapsed.copy(), self._contact_sum / length[:, None]
 
     def draw_initial_states(self, ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(n, nq) positions and (n, nv) velocities of the next initial states of ``ids``.

@@ -60,26 +60,6 @@ def import_warp() -> tuple[Any, Any]:
     return warp, mujoco_warp
 
 
-def warp_device(device: str) -> str:
-    """The Warp device for ``env.device``; a clear error where it does not exist.
-
-    Args:
-        device: ``"cpu"``, ``"cuda"`` or ``"cuda:N"``.
-
-    Raises:
-        ValueError: naming ``env.device`` if the device is unknown or absent.
-    """
-    warp, _ = import_warp()
-    if device != "cpu" and not device.startswith("cuda"):
-        raise ValueError(f"env.device must be 'cpu', 'cuda' or 'cuda:N', got {device!r}")
-    if device.startswith("cuda") and not warp.is_cuda_available():
-        raise ValueError(
-            f"env.device: {device!r} asked for, but Warp finds no CUDA device on this "
-            "machine; use env.device: cpu (slow, for tests) or run on a machine with a GPU"
-        )
-    return device
-
-
 class WarpBatch:
     """``num_sims`` simulations of one model, advanced together on a MuJoCo Warp device.
 
@@ -90,7 +70,8 @@ class WarpBatch:
             keyed by a name of the caller's choosing.
         rne_post_constraint: run ``rne_postconstraint`` after each step, as gymnasium does
             (needed for ``cfrc_ext``).
-        device: Warp device, ``"cpu"`` or ``"cuda[:N]"``.
+        device: the torch device of the Warp device, CPU or CUDA (checked by
+            :func:`qdil.devices.run_device`).
         num_threads: accepted for the same signature as :class:`MujocoBatch`; unused.
         graphs: record each fixed sequence of Warp launches (a frame skip of steps, the
             sensor pass, a reset) in a Warp graph at its first call and replay it after:
@@ -102,7 +83,7 @@ class WarpBatch:
         sensordata: (N, nsensordata) float64 host array of sensor values at the current states.
         torch_exported: (N, E) float32 tensor on the device, the same values.
         torch_sensordata: (N, nsensordata) float32 tensor on the device.
-        torch_device: the torch device of the Warp device.
+        torch_device: ``device``.
 
     Raises:
         ValueError: if ``num_sims`` is below 1, an export names an unknown field, or the
@@ -116,7 +97,7 @@ class WarpBatch:
         exports: dict[str, Export],
         *,
         rne_post_constraint: bool = False,
-        device: str = "cpu",
+        device: torch.device = torch.device("cpu"),  # noqa: B008 - an immutable value
         num_threads: int | None = None,
         graphs: bool = True,
     ) -> None:
@@ -128,14 +109,19 @@ class WarpBatch:
                 "Newton-solver variant (e.g. Humanoid-v5-newton) with env.backend: warp"
             )
         self.warp, self.mjw = import_warp()
+        if device.type == "cuda" and not self.warp.is_cuda_available():
+            raise ValueError(
+                f"env.device: {str(device)!r} asked for, but Warp finds no CUDA device on this "
+                "machine; use env.device: cpu (slow, for tests) or run on a machine with a GPU"
+            )
         # the whole integration state (time, qpos, qvel, act, warm start, ctrl, ...)
         self._state = int(self.mjw.State.INTEGRATION)
         self.model = model
         self.num_sims = num_sims
         self.num_threads = 1
         self.rne_post_constraint = rne_post_constraint
-        self.device = warp_device(device)
-        with self.warp.ScopedDevice(self.device):
+        self.warp_device = str(device)  # Warp's name of it: "cpu", "cuda" or "cuda:N"
+        with self.warp.ScopedDevice(self.warp_device):
             self.wmodel = self.mjw.put_model(model)
             self.wdata = self.mjw.make_data(model, nworld=num_sims)
             size = mujoco.mj_stateSize(model, self._state)
@@ -143,14 +129,14 @@ class WarpBatch:
             self._keep = self.warp.zeros(num_sims, dtype=bool)
             self._reset_mask = self.warp.zeros(num_sims, dtype=bool)
             # later launches go on torch's stream (_on_torch_stream): finish these first
-            self.warp.synchronize_device(self.device)
-        self.torch_device = torch.device(self.device)
+            self.warp.synchronize_device(self.warp_device)
+        self.torch_device = device
         self.graphs = graphs
         self._graphs: dict[tuple, Any] = {}  # None: launched from Python
         # a CUDA graph cannot be recorded on torch's legacy default stream: record on one
         # of Warp's and replay on torch's (the CPU device records without a stream)
         on_gpu = self.torch_device.type == "cuda"
-        self._capture_stream = self.warp.Stream(self.device) if on_gpu and graphs else None
+        self._capture_stream = self.warp.Stream(self.warp_device) if on_gpu and graphs else None
 
         self._fields = export_bounds(mujoco.MjData(model), exports)
         self._slices = export_slices(self._fields, list(exports))
@@ -174,7 +160,7 @@ class WarpBatch:
         and no one waits on the host. On the CPU every launch finishes before it returns.
         """
         if self.torch_device.type != "cuda":
-            return self.warp.ScopedDevice(self.device)
+            return self.warp.ScopedDevice(self.warp_device)
         stream = torch.cuda.current_stream(self.torch_device)
         return self.warp.ScopedStream(self.warp.stream_from_torch(stream))
 
@@ -297,7 +283,7 @@ class WarpBatch:
             return
         try:
             with self._recording_stream():
-                capture = self.warp.ScopedCapture(device=self.device)
+                capture = self.warp.ScopedCapture(device=self.warp_device)
                 with capture:
                     launches()
             self._graphs[key] = capture.graph

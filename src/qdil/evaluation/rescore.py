@@ -16,6 +16,7 @@ import numpy as np
 import yaml
 from ribs.archives import GridArchive
 
+from qdil.envs.faces import torch_face
 from qdil.envs.vector import LocomotionVectorEnv
 from qdil.files import CONFIG_NAME, atomic_write
 from qdil.provenance import provenance
@@ -146,6 +147,7 @@ def rescore(
     count = len(elites["objective"])
     width = min(batch, max(count, 1))
     env = settings.make_env(width * episodes, num_threads)
+    face = torch_face(env)
     obs_dim = env.single_observation_space.shape[0]
     objective, measures, lengths = np.zeros(count), np.zeros((count, env.num_feet)), np.zeros(count)
     spread = np.zeros(count)
@@ -158,7 +160,7 @@ def rescore(
         rows = np.arange(start, min(start + width, count))
         actor, stats = elite_policies(elites, rows, env, settings.actor_hidden)
         result = evaluate_policies(
-            env, actor, stats, episodes, seed + start, None, True, settings.obs_clip
+            face, actor, stats, episodes, seed + start, None, True, settings.obs_clip
         )
         objective[rows], measures[rows], lengths[rows] = (
             result.true_objective,

@@ -23,6 +23,7 @@ import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
 from qdil.demos.generate import farthest_point_sampling
+from qdil.envs.faces import HostFace
 from qdil.envs.rendering import CAMERA_DISTANCE
 from qdil.envs.vector import LocomotionVectorEnv
 from qdil.evaluation.gl import use_gl_backend
@@ -195,7 +196,7 @@ def play(
     Returns:
         The player, holding the episode's return, length and measures.
     """
-    player = EpisodePlayer(env, 1, seed, record=False)
+    player = EpisodePlayer(HostFace(env), 1, seed, record=False)  # drawn from host arrays
     so_far = 0.0
     show(0, so_far, player.contacts[0].numpy())
     while not player.finished:
@@ -233,7 +234,7 @@ def record(
         frames=writer.count,
         steps=player.num_steps,
         episode_return=float(player.returns[0]),
-        measures=player.measures[0].copy(),
+        measures=player.measures[0].numpy().copy(),
         seconds=time.perf_counter() - start,
         draw_seconds=painter.seconds - drawn,
     )

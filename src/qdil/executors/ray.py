@@ -6,7 +6,7 @@ Ray does the scheduling, the transport and the fault handling: every worker is a
 starts it again (on any node with a free CPU) and runs the interrupted call again; the
 worker replays its phase from references the head keeps, so the retried call returns the
 same numbers. A worker that cannot be restarted stops the run with an
-:class:`~qdil.rl.execution.ExecutorError`; ``qdil fit --resume`` continues it from its
+:class:`~qdil.executors.base.ExecutorError`; ``qdil fit --resume`` continues it from its
 last checkpoint, with Ray or locally. The head sends each call once to Ray's object store
 (``ray.put``) and the workers read it from there.
 """
@@ -19,9 +19,9 @@ import socket
 from typing import Any
 
 from qdil import numerics
+from qdil.executors.base import ExecutorError
 from qdil.executors.sharded import ShardedExecutor
 from qdil.executors.worker import ShardWorker
-from qdil.rl.execution import ExecutorError
 
 INSTALL_HINT = "the Ray executor needs Ray: pip install 'qdil[ray]'"
 CONNECT_TIMEOUT_S = 5.0
@@ -166,7 +166,7 @@ def _token_refused_message(address: str | None) -> str:
         address: the Ray address given to the executor.
 
     Returns:
-        The message of the :class:`~qdil.rl.execution.ExecutorError`.
+        The message of the :class:`~qdil.executors.base.ExecutorError`.
     """
     mode = os.environ.get("RAY_AUTH_MODE")
     if mode == "token":

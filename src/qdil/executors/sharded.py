@@ -19,12 +19,13 @@ import numpy as np
 import torch
 
 from qdil.data import Rollout
+from qdil.devices import DEVICE_BACKENDS
 from qdil.envs.vector import LocomotionVectorEnv
+from qdil.executors.base import Executor
 from qdil.executors.shards import MIN_ROWS, advance, payload_bytes, shard_bounds
-from qdil.executors.worker import CollectCall, EvaluateCall, Phase, Played
-from qdil.rl.collect import PolicyData, RewardFn, RolloutSteps, finish_rollout
-from qdil.rl.episodes import Evaluation, score
-from qdil.rl.execution import Executor
+from qdil.executors.worker import CollectCall, EvaluateCall, Phase
+from qdil.rl.collect import EpisodeLog, PolicyData, RewardFn, RolloutSteps, finish_rollout
+from qdil.rl.episodes import Evaluation, Played, score
 from qdil.rl.networks import VectorizedActor
 from qdil.rl.normalize import RunningMeanStd
 
@@ -53,7 +54,7 @@ class ShardedExecutor(Executor):
         self._phase = Phase(0, 0)
         self._history: list[Any] = []
         self._evaluations = 0
-        self._episodes: tuple[list[float], list[int]] = ([], [])
+        self.episodes = EpisodeLog()
 
     # ------------------------------------------------------------ the transport
     @abc.abstractmethod
@@ -78,7 +79,7 @@ class ShardedExecutor(Executor):
             ValueError: the physics runs on a device backend, whose simulations stay on
                 their device (naming ``env.backend``).
         """
-        if train_env.backend != "mujoco":
+        if train_env.backend in DEVICE_BACKENDS:
             raise ValueError(
                 f"env.backend: {train_env.backend!r} keeps its simulations on one device; "
                 "workers step the C MuJoCo backend only (set env.backend: mujoco, or drop "
@@ -126,21 +127,23 @@ class ShardedExecutor(Executor):
         self.bytes_sent += payload_bytes(call) * len(self.bounds)
         self.bytes_received += payload_bytes(parts)
         advance(generator, n, self.action_dim, num_steps)
+
+        def joined(field: str) -> torch.Tensor:  # the shards side by side, in order
+            return torch.cat([getattr(p, field) for p in parts], 1)
+
         steps = RolloutSteps(
             {key: torch.cat([p.buffers[key] for p in parts], 1) for key in parts[0].buffers},
-            torch.cat([p.norm_obs for p in parts], 1),
-            torch.cat([p.policy_actions for p in parts], 1),
-            _merge_ended(parts, num_steps),
+            joined("norm_obs"),
+            joined("policy_actions"),
+            joined("episode_returns"),
+            joined("episode_lengths"),
         )
-        for _, _, returns, lengths in steps.ended:
-            self._episodes[0].extend(returns.tolist())
-            self._episodes[1].extend(lengths.tolist())
+        self.episodes.add(steps)
         return finish_rollout(steps, num_policies, stats, self.obs_clip, update_stats)
 
     def pop_episode_stats(self) -> tuple[list[float], list[int]]:
         """Returns and lengths of the training episodes finished since the last call."""
-        episodes, self._episodes = self._episodes, ([], [])
-        return episodes
+        return self.episodes.pop()
 
     def evaluate(
         self,
@@ -183,29 +186,15 @@ class ShardedExecutor(Executor):
         self.bytes_received += payload_bytes(plays)
         if not deterministic:
             advance(generator, used, self.action_dim, num_steps)
-        rollout = _cat(rollouts, 1) if record else None
-        return score(
-            np.concatenate([p.returns for p in plays]),
-            np.concatenate([p.lengths for p in plays]),
-            np.concatenate([p.measures for p in plays]),
-            sum(p.env_steps for p in plays),
-            rollout,
-            actor.num_models,
-            episodes,
-            reward_fn,
+        played = Played(
+            returns=np.concatenate([p.returns for p in plays]),
+            lengths=np.concatenate([p.lengths for p in plays]),
+            measures=np.concatenate([p.measures for p in plays]),
+            env_steps=sum(p.env_steps for p in plays),
+            num_steps=num_steps,
+            rollout=_cat(rollouts, 1) if record else None,
         )
-
-
-def _merge_ended(
-    parts: list[RolloutSteps], num_steps: int
-) -> list[tuple[int, np.ndarray, np.ndarray, np.ndarray]]:
-    """The shards' ended episodes in the local order: by step, then by simulation."""
-    merged = []
-    for t in range(num_steps):
-        found = [e for p in parts for e in p.ended if e[0] == t]
-        if found:
-            merged.append((t, *(np.concatenate([e[i] for e in found]) for i in (1, 2, 3))))
-    return merged
+        return score(played, actor.num_models, episodes, reward_fn)
 
 
 def _cat(rollouts: list[Any], dim: int) -> Rollout:

@@ -12,17 +12,19 @@ references, so a retried call returns what the first attempt would have.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Any
 
 import torch
 
 from qdil import numerics
 from qdil.data import Rollout
+from qdil.envs.faces import torch_face
+from qdil.envs.torch_step import TorchFace
 from qdil.envs.vector import LocomotionVectorEnv
 from qdil.executors.shards import NoiseReplay, ShardPolicies
 from qdil.rl.collect import Collector, RolloutSteps
-from qdil.rl.episodes import EpisodePlayer
+from qdil.rl.episodes import EpisodePlayer, Played
 from qdil.rl.networks import VectorizedActor
 from qdil.rl.normalize import RunningMeanStd
 
@@ -61,27 +63,6 @@ class EvaluateCall:
     obs_clip: float
 
 
-@dataclass(frozen=True)
-class Played:
-    """A shard's evaluation episodes: per-slot results and, if recorded, its steps.
-
-    Attributes:
-        returns: (n,) true returns.
-        lengths: (n,) lengths.
-        measures: (n, k) episode measures.
-        env_steps: simulated env steps.
-        num_steps: loop steps taken (the longest episode of the shard).
-        rollout: (steps, n, ...) recorded steps (``None`` unless recorded).
-    """
-
-    returns: Any
-    lengths: Any
-    measures: Any
-    env_steps: int
-    num_steps: int
-    rollout: Rollout | None
-
-
 class ShardWorker:
     """Owns the simulations [start, stop) of the training batch and evaluation shards.
 
@@ -107,8 +88,8 @@ class ShardWorker:
         torch.set_num_threads(threads)
         self.factory, self.start, self.stop, self.threads = factory, start, stop, threads
         env = factory(stop - start, autoreset_mode="SameStep", num_threads=threads)
-        self.collector = Collector(env)
-        self.eval_envs: dict[int, LocomotionVectorEnv] = {}
+        self.collector = Collector(torch_face(env))
+        self.eval_faces: dict[int, TorchFace] = {}
         self.phase: int | None = None
         self.calls = 0
         self.player: tuple[int, EpisodePlayer, ShardPolicies, NoiseReplay | None] | None = None
@@ -144,18 +125,17 @@ class ShardWorker:
             lambda obs: policies.sample(obs, noise(), False, True), call.num_steps
         )
         self.calls += 1
-        ended = [(t, index + self.start, r, n) for t, index, r, n in steps.ended]
-        return replace(steps, ended=ended)
+        return steps
 
     # ---------------------------------------------------------------- evaluation
     def evaluate(self, call: EvaluateCall, start: int, stop: int) -> Played:
         """Play the slots [start, stop) of an evaluation to the end of their episodes."""
-        env = self.eval_envs.get(stop - start)
-        if env is None:
+        face = self.eval_faces.get(stop - start)
+        if face is None:
             env = self.factory(stop - start, autoreset_mode="Disabled", num_threads=self.threads)
-            self.eval_envs[stop - start] = env
+            face = self.eval_faces[stop - start] = torch_face(env)
         seeds = [call.seed + start + j for j in range(stop - start)]
-        player = EpisodePlayer(env, stop - start, seeds, call.record)
+        player = EpisodePlayer(face, stop - start, seeds, call.record)
         policies = ShardPolicies(call.actor, call.stats, call.obs_clip, start, stop, call.episodes)
         noise = None
         if call.noise_state is not None:
@@ -164,14 +144,7 @@ class ShardWorker:
         self.player = (call.number, player, policies, noise)
         while not player.finished:
             self._step()
-        return Played(
-            player.returns,
-            player.lengths,
-            player.measures,
-            player.env_steps,
-            player.num_steps,
-            player.rollout(),
-        )
+        return player.played()
 
     def extend(self, call: EvaluateCall, start: int, stop: int, num_steps: int) -> Rollout | None:
         """``num_steps`` more recorded steps after the shard's episodes ended.

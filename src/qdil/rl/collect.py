@@ -22,7 +22,7 @@ import numpy as np
 import torch
 
 from qdil.data import Rollout
-from qdil.envs.vector import LocomotionVectorEnv
+from qdil.envs.torch_step import TorchFace
 from qdil.rl.networks import VectorizedActor
 from qdil.rl.normalize import RunningMeanStd
 from qdil.rl.sampler import PolicySampler
@@ -44,7 +44,7 @@ class ActionMap:
     """
 
     def __init__(
-        self, low: np.ndarray, high: np.ndarray, device: torch.device | str | None = None
+        self, low: np.ndarray, high: np.ndarray, device: torch.device | None = None
     ) -> None:
         self.low = torch.as_tensor(low, dtype=torch.float32, device=device)
         self.half = torch.as_tensor((high - low) / 2.0, dtype=torch.float32, device=device)
@@ -77,21 +77,24 @@ def policy_blocks(x: torch.Tensor, num_policies: int) -> torch.Tensor:
 
 
 class Collector:
-    """Collects fixed-length rollouts from a ``SAME_STEP`` autoreset environment.
+    """Collects fixed-length rollouts through a ``SAME_STEP`` autoreset torch face.
+
+    The rollout stays on the face's device: no step reads from it on the host (the finished
+    episodes' returns and lengths are read once, in :meth:`pop_episode_stats`).
 
     Args:
-        env: the training environment (``autoreset_mode=SAME_STEP``).
+        env: the torch face of the training environment (``autoreset_mode=SAME_STEP``).
         obs_clip: bound of normalised observations.
     """
 
-    def __init__(self, env: LocomotionVectorEnv, obs_clip: float = 10.0) -> None:
-        if env.autoreset_mode.value != "SameStep":
+    def __init__(self, env: TorchFace, obs_clip: float = 10.0) -> None:
+        if not env.autoreset:
             raise ValueError("the training environment must use autoreset_mode=SAME_STEP")
         self.env = env
+        self.device = env.device
         self.obs_clip = obs_clip
-        self.action_map = ActionMap(env.single_action_space.low, env.single_action_space.high)
-        self.episode_returns: list[float] = []
-        self.episode_lengths: list[int] = []
+        self.action_map = ActionMap(env.action_low, env.action_high, self.device)
+        self.episodes = EpisodeLog()
         self._obs: torch.Tensor | None = None
         self._contacts: torch.Tensor | None = None
         self._starts: torch.Tensor | None = None
@@ -103,10 +106,9 @@ class Collector:
             seed: simulation i is seeded with ``seed + i``; a list gives one seed each (a
                 shard of a larger batch passes the seeds of its simulations).
         """
-        obs, info = self.env.reset(seed=seed)
-        self._obs = torch.from_numpy(obs).float()
-        self._contacts = torch.from_numpy(info["foot_contact"])
-        self._starts = torch.ones(len(obs))
+        obs, contacts = self.env.reset(seed)
+        self._obs, self._contacts = obs.float(), contacts
+        self._starts = torch.ones(len(obs), device=self.device)
 
     def collect(
         self,
@@ -119,23 +121,22 @@ class Collector:
         """Roll out ``num_steps`` steps of P policies on the N simulations.
 
         Args:
-            actor: P policies; N must be divisible by P.
-            stats: their observation statistics (used frozen during the rollout).
+            actor: P policies on the face's device; N must be divisible by P.
+            stats: their observation statistics there (used frozen during the rollout).
             num_steps: T.
-            generator: random source of the action noise.
+            generator: random source of the action noise, on the face's device.
             update_stats: merge the rollout's observations into ``stats`` afterwards.
 
         Returns:
-            The rollout (raw observations, executed actions, true rewards) and PPO's extras.
+            The rollout (raw observations, executed actions, true rewards) and PPO's extras,
+            (T, N, ...) tensors on the face's device.
         """
         n = self.env.num_envs
         if n % actor.num_models:
             raise ValueError(f"{n} environments cannot be split among {actor.num_models} policies")
         sampler = PolicySampler(actor, stats, self.obs_clip)
         steps = self.roll(lambda obs: sampler.sample(obs, generator), num_steps)
-        for _, _, returns, lengths in steps.ended:
-            self.episode_returns += returns.tolist()
-            self.episode_lengths += lengths.tolist()
+        self.episodes.add(steps)
         return finish_rollout(steps, actor.num_models, stats, self.obs_clip, update_stats)
 
     def roll(self, policy: Policy, num_steps: int) -> RolloutSteps:
@@ -146,72 +147,47 @@ class Collector:
             num_steps: T.
 
         Returns:
-            The step buffers; episodes run on into the next call.
+            The steps; episodes run on into the next call.
         """
         if self._obs is None or self._contacts is None or self._starts is None:
             raise RuntimeError("call start() before collect()")
-        env, n = self.env, self.env.num_envs
-        obs_dim, k = self._obs.shape[1], self._contacts.shape[1]
-        action_dim = env.single_action_space.shape[0]
-        shape = (num_steps, n)
-        buf = {
-            "obs": torch.zeros((*shape, obs_dim)),
-            "next_obs": torch.zeros((*shape, obs_dim)),
-            "actions": torch.zeros((*shape, action_dim)),
-            "contacts": torch.zeros((*shape, k)),
-            "next_contacts": torch.zeros((*shape, k)),
-            "rewards": torch.zeros(shape),
-            "dones": torch.zeros(shape),
-            "terminated": torch.zeros(shape),
-            "log_probs": torch.zeros(shape),
-            "starts": torch.zeros(shape),
-        }
-        # numpy views of the buffers: the loop writes the env's arrays into them directly
-        # (the same float64 -> float32 rounding as a tensor copy), without tensor wrappers
-        arr = {key: value.numpy() for key, value in buf.items()}
-        norm_obs = torch.zeros((*shape, obs_dim))
-        policy_actions = torch.zeros((*shape, action_dim))
-        ended: list[tuple[int, np.ndarray, np.ndarray, np.ndarray]] = []
-        buf["obs"][0] = self._obs
-        buf["contacts"][0] = self._contacts
-        buf["starts"][0] = self._starts
-        for t in range(num_steps):
-            # the policies read s_t from the buffer it is stored in
-            norm, actions, log_probs = policy(buf["obs"][t])
+        obs, contacts = self._obs, self._contacts
+        # each step's tensors are new: kept (float32 observations, not the float64 ones) and
+        # stacked once, which costs less than writing each into a (T, N) buffer
+        kept: list[dict[str, torch.Tensor]] = []
+        for _ in range(num_steps):
+            norm, actions, log_probs = policy(obs)
             executed = self.action_map(actions)
-            next_obs, reward, terminated, truncated, info = env.step(executed.numpy())
-            done = terminated | truncated
-            contacts = info["foot_contact"]
-            arr["next_obs"][t] = next_obs
-            arr["next_contacts"][t] = contacts
-            if done.any():  # s_{t+1} is the final state, not the reset one
-                arr["next_obs"][t, done] = info["final_obs"][done]
-                arr["next_contacts"][t, done] = info["final_info"]["foot_contact"][done]
-                mask = info["episode"]["_r"]
-                episode = info["episode"]
-                ended.append((t, np.flatnonzero(mask), episode["r"][mask], episode["l"][mask]))
-            buf["actions"][t] = executed
-            arr["rewards"][t] = reward
-            arr["dones"][t] = done
-            arr["terminated"][t] = terminated
-            buf["log_probs"][t] = log_probs
-            norm_obs[t] = norm
-            policy_actions[t] = actions
-            if t + 1 < num_steps:
-                arr["obs"][t + 1] = next_obs
-                arr["contacts"][t + 1] = contacts
-                arr["starts"][t + 1] = done
+            step = self.env.step(executed)
+            next_obs = step.final_obs.float()  # s_{t+1} is the state reached, not the reset one
+            kept.append({
+                "obs": obs, "next_obs": next_obs, "actions": executed, "contacts": contacts,
+                "next_contacts": step.final_contacts, "rewards": step.reward, "dones": step.done,
+                "terminated": step.terminated, "log_probs": log_probs, "norm_obs": norm,
+                "policy_actions": actions, "episode_returns": step.episode_return,
+                "episode_lengths": step.episode_length,
+            })  # fmt: skip
+            obs = next_obs if step.obs is step.final_obs else step.obs.float()
+            contacts = step.contacts
+        t = {key: torch.stack([kept_step[key] for kept_step in kept]) for key in kept[0]}
+        dones = t["dones"].float()
+        buffers = {
+            **{key: t[key] for key in ("obs", "next_obs", "actions", "contacts", "next_contacts")},
+            "rewards": t["rewards"].float(),
+            "dones": dones,
+            "terminated": t["terminated"].float(),
+            "log_probs": t["log_probs"],
+            "starts": torch.cat([self._starts[None], dones[:-1]]),
+        }
         # where the next call goes on
-        self._obs = torch.from_numpy(next_obs).float()
-        self._contacts = torch.from_numpy(contacts)
-        self._starts = torch.from_numpy(done.astype(np.float32))
-        return RolloutSteps(buf, norm_obs, policy_actions, ended)
+        self._obs, self._contacts, self._starts = obs, contacts, dones[-1]
+        return RolloutSteps(
+            buffers, t["norm_obs"], t["policy_actions"], t["episode_returns"], t["episode_lengths"]
+        )
 
     def pop_episode_stats(self) -> tuple[list[float], list[int]]:
-        """Returns and lengths of the episodes finished since the last call."""
-        stats = (self.episode_returns, self.episode_lengths)
-        self.episode_returns, self.episode_lengths = [], []
-        return stats
+        """Returns and lengths of the episodes finished since the last call (one host read)."""
+        return self.episodes.pop()
 
 
 @dataclass(frozen=True)
@@ -222,14 +198,38 @@ class RolloutSteps:
         buffers: the :class:`Rollout` fields except ``valid``, (T, n, ...) tensors.
         norm_obs: (T, n, obs_dim) normalised s_t as the policies saw them.
         policy_actions: (T, n, A) sampled, unclipped actions.
-        ended: per step where episodes ended: (t, (e,) simulation indices, (e,) returns,
-            (e,) lengths), indices in simulation order.
+        episode_returns: (T, n) float64 true returns of the episodes that ended at step t
+            (0 elsewhere).
+        episode_lengths: (T, n) int64 lengths of those episodes (0 elsewhere).
     """
 
     buffers: dict[str, torch.Tensor]
     norm_obs: torch.Tensor
     policy_actions: torch.Tensor
-    ended: list[tuple[int, np.ndarray, np.ndarray, np.ndarray]]
+    episode_returns: torch.Tensor
+    episode_lengths: torch.Tensor
+
+
+class EpisodeLog:
+    """The training episodes that ended in rollouts, read from the device only when popped."""
+
+    def __init__(self) -> None:
+        self._rollouts: list[tuple[torch.Tensor, torch.Tensor, torch.Tensor]] = []
+
+    def add(self, steps: RolloutSteps) -> None:
+        """Keep the episodes that ended in ``steps``."""
+        ended = steps.buffers["dones"] > 0
+        self._rollouts.append((ended, steps.episode_returns, steps.episode_lengths))
+
+    def pop(self) -> tuple[list[float], list[int]]:
+        """Returns and lengths of the episodes kept since the last call (step, then slot)."""
+        returns: list[float] = []
+        lengths: list[int] = []
+        for ended, episode_returns, episode_lengths in self._rollouts:
+            returns += episode_returns[ended].tolist()
+            lengths += episode_lengths[ended].tolist()
+        self._rollouts = []
+        return returns, lengths
 
 
 def finish_rollout(

@@ -1,42 +1,14 @@
 """VPPO: PPGA's vectorised PPO, the gradient estimator and the walk of the search policy.
 
-Reads top to bottom (CleanRL style). Two phases use the same PPO update:
-
-1. ``compute_jacobian``: k+1 copies of the search policy θ_μ train side by side on one batch
-   of simulations for N1 PPO iterations. Copy 0 maximises the reward handed in by the QD
-   loop (learned, or the task's true reward); copy j maximises the per-step measure proxy
-   δ_j (foot j touching the floor after the step). The rows of the Jacobian are the
-   parameter deltas θ_j − θ_μ; the emitter normalises them.
-2. ``walk``: θ_μ trains N2 PPO iterations on c_0·r̂ + Σ_j c_j·δ_j with c the ES mean over
-   gradient coefficients (decision D2; the public QD-IL code drops Σ c_j δ_j).
-
-Implementation details, with PPGA's quirks (``ppga_qdil.md`` §1.9) decided deliberately:
-
-1. Diagonal-Gaussian MLP actor (tanh) and critics with orthogonal initialisation.
-2. Observations are normalised per policy; the statistics travel with each solution. The
-   Jacobian copies use θ_μ's statistics *frozen* (Q3: PPGA gives copies fresh statistics,
-   so their deltas live in a different input scale than θ_μ's branches); the walk updates
-   θ_μ's statistics after each rollout. Statistics start at mean 0, variance 1, float64
-   (Q1: PPGA starts the mean at 1, float32).
-3. Value targets are normalised per objective with running statistics; values are
-   de-normalised consistently before GAE (Q2: PPGA leaves the stored values normalised).
-4. Advantages are normalised per minibatch *per objective* (Q4: PPGA mixes f and m_j).
-5. GAE with γ = 0.99, λ = 0.95; a time-limit truncation bootstraps from the final state
-   (``bootstrap_truncation``; PPGA treats it as terminal).
-6. Clipped surrogate (0.2), clipped value loss (0.2, coefficient 2), no entropy bonus,
-   per-policy gradient clipping at 1.0 (PPGA clips all stacked copies jointly), early stop
-   of the epochs when the mean approximate KL exceeds ``target_kl``.
-7. Minibatches are shuffled within each policy's samples (PPGA takes contiguous,
-   unshuffled slices).
-8. Critics and their optimisers persist across QD iterations and restarts; the actor's
-   optimiser is new in every phase (as PPGA).
-9. With ``adaptive_std=False`` the log standard deviations stay 0 (σ = 1) and are not
-   trained, so Jacobian rows and branches leave them unchanged.
+Reads top to bottom (CleanRL style): :meth:`VPPO.compute_jacobian` trains k+1 copies of
+θ_μ side by side, :meth:`VPPO.walk` moves θ_μ, both with the same PPO update
+(:func:`qdil.rl.ppo.ppo_update`); an executor steps the simulations. Why each detail is as
+it is: ``docs/concepts/vppo.md``.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, fields
 
 import numpy as np
@@ -44,14 +16,19 @@ import torch
 
 from qdil.data import Rollout
 from qdil.envs.vector import LocomotionVectorEnv
-from qdil.rl.collect import ActionMap, PolicyData
+from qdil.executors.base import Executor
+from qdil.executors.local import LocalExecutor
+from qdil.rl.collect import ActionMap, PolicyData, RewardFn
 from qdil.rl.episodes import Evaluation, EvaluationGroup
-from qdil.rl.execution import Executor, LocalExecutor, default_executor
 from qdil.rl.networks import VectorizedActor, VectorizedCritic
 from qdil.rl.normalize import RunningMeanStd
 from qdil.rl.ppo import PPOSettings, ppo_update
 
-RewardFn = Callable[[Rollout], torch.Tensor]
+# each phase's critic, its optimiser and return statistics: they persist across QD
+# iterations and restarts (checkpointed beside the noise generator)
+_PERSISTENT = tuple(
+    f"{p}_{x}" for p in ("jacobian", "walk") for x in ("critic", "critic_opt", "returns")
+)
 
 
 @dataclass(frozen=True)
@@ -76,7 +53,7 @@ class PhaseResult:
 class VPPO:
     """PPGA's gradient estimator and search-policy walk (paper Alg. 1, lines 4 and 16).
 
-    Defaults are the paper's (``ppga_qdil.md`` §3, Walker2d column).
+    Defaults are the paper's (PPGA's Walker2d hyperparameters).
 
     Args:
         rollout_length: steps per environment per PPO iteration.
@@ -164,26 +141,23 @@ class VPPO:
         train_env: LocomotionVectorEnv,
         eval_env: LocomotionVectorEnv,
         seed: int,
-        device: torch.device | str = "cpu",
         executor: Executor | None = None,
     ) -> None:
         """Bind the environments and build the persistent critics.
 
-        Rollouts go through the environments' torch face where their physics has one (the
-        warp backend: no host copy per step), through gymnasium's numpy face otherwise.
+        The policies, critics, statistics, rollouts and the noise generator live on the
+        physics' device, ``train_env.device``.
 
         Args:
             train_env: ``SAME_STEP`` environment of the PPO phases; its N must be divisible
                 by k+1.
-            eval_env: ``DISABLED`` environment of the evaluations.
+            eval_env: ``DISABLED`` environment of the evaluations, on the same device.
             seed: seed of the critics' initialisation and the action noise.
-            device: the run's device: policies, critics, statistics, rollout buffers and
-                the noise generator live there; it must be the physics' device.
-            executor: who steps the simulations (default: here, on the physics' device).
+            executor: who steps the simulations (default: here, :class:`LocalExecutor`).
 
         Raises:
-            ValueError: if N is not divisible by k+1, or ``device`` is not the physics'
-                device (naming ``env.device``).
+            ValueError: if N is not divisible by k+1, or the environments' devices differ
+                (naming ``env.device``).
         """
         num_objectives = train_env.num_feet + 1
         if train_env.num_envs % num_objectives:
@@ -191,22 +165,16 @@ class VPPO:
                 f"env.num_envs={train_env.num_envs} must be divisible by k+1={num_objectives} "
                 "(one block of simulations per VPPO copy)"
             )
-        self.device = torch.device(device)
-        for env in (train_env, eval_env):
-            physics_device = getattr(env.physics, "torch_device", torch.device("cpu"))
-            if physics_device.type != self.device.type:
-                raise ValueError(
-                    f"env.device: the physics steps on {physics_device} but the policies "
-                    f"would run on {self.device}; one env.device places both"
-                )
+        if eval_env.device != train_env.device:
+            raise ValueError(
+                f"env.device: the training physics steps on {train_env.device} but the "
+                f"evaluations' on {eval_env.device}; one env.device places both"
+            )
+        self.device = train_env.device
         self.train_env, self.eval_env = train_env, eval_env
         if train_env.autoreset_mode.value != "SameStep":
             raise ValueError("the training environment must use autoreset_mode=SAME_STEP")
-        if executor is None or type(executor) is LocalExecutor:
-            # in this process, the face that fits the physics: a recipe's default
-            # LocalExecutor on a device backend steps through the torch face
-            executor = default_executor(train_env)
-        self.executor = executor
+        self.executor = LocalExecutor() if executor is None else executor
         self.executor.setup(train_env, eval_env, self.obs_clip)
         self.action_map = ActionMap(
             train_env.single_action_space.low, train_env.single_action_space.high, self.device
@@ -281,20 +249,10 @@ class VPPO:
             f_rollout = rollout.columns(0, block)
             rewards[:, :block] = reward_fn(f_rollout)
             for j in range(1, k1):
-                rewards[:, j * block : (j + 1) * block] = rollout.next_contacts[
-                    :, j * block : (j + 1) * block, j - 1
-                ]
+                copy_j = slice(j * block, (j + 1) * block)
+                rewards[:, copy_j] = rollout.next_contacts[:, copy_j, j - 1]
             diagnostics.append(
-                self._ppo_update(
-                    actor,
-                    actor_opt,
-                    self.jacobian_critic,
-                    self.jacobian_critic_opt,
-                    self.jacobian_returns,
-                    rollout,
-                    pdata,
-                    rewards,
-                )
+                self._ppo_update("jacobian", actor, actor_opt, rollout, pdata, rewards)
             )
             rollouts.append(f_rollout)
         steps = self.jacobian_iterations * self.rollout_length * self.train_env.num_envs
@@ -331,18 +289,7 @@ class VPPO:
                 actor, stats, self.rollout_length, self.generator, update_stats=True
             )
             rewards = c[0] * reward_fn(rollout) + (rollout.next_contacts * c[1:]).sum(-1)
-            diagnostics.append(
-                self._ppo_update(
-                    actor,
-                    actor_opt,
-                    self.walk_critic,
-                    self.walk_critic_opt,
-                    self.walk_returns,
-                    rollout,
-                    pdata,
-                    rewards,
-                )
-            )
+            diagnostics.append(self._ppo_update("walk", actor, actor_opt, rollout, pdata, rewards))
             rollouts.append(rollout)
         steps = self.walk_iterations * self.rollout_length * self.train_env.num_envs
         return PhaseResult(actor.get_solutions(), stats, rollouts, _mean(diagnostics), steps)
@@ -367,10 +314,9 @@ class VPPO:
     ) -> list[Evaluation]:
         """Score several groups of solutions, each over its own episodes and reset seed.
 
-        The executor may play the groups side by side (on a device it does): there each
-        group's action noise comes from a generator seeded with its own reset seed, so its
-        result is the same side by side or in turns. An executor that plays them in turns on
-        the C engine draws the noise from the training generator, as before.
+        On a device the executor plays the groups side by side, each with noise from a
+        generator seeded with its reset seed; on the C engine in turns, with noise from the
+        training generator (``docs/concepts/vppo.md``).
 
         Args:
             requests: ``(solutions (P, D), stats, episodes, seed)`` of each group.
@@ -414,51 +360,36 @@ class VPPO:
     # ---------------------------------------------------------------- PPO core
     def _ppo_update(
         self,
+        phase: str,
         actor: VectorizedActor,
         actor_opt: torch.optim.Optimizer,
-        critic: VectorizedCritic,
-        critic_opt: torch.optim.Optimizer,
-        return_stats: RunningMeanStd,
         rollout: Rollout,
         pdata: PolicyData,
         rewards: torch.Tensor,
     ) -> dict[str, float]:
-        """One PPO iteration with this estimator's settings (:func:`qdil.rl.ppo.ppo_update`)."""
+        """One PPO iteration (:func:`qdil.rl.ppo.ppo_update`) on (T, N) ``rewards``.
+
+        It trains the critic, critic optimiser and return statistics of ``phase``.
+        """
         settings = PPOSettings(**{f.name: getattr(self, f.name) for f in fields(PPOSettings)})
-        return ppo_update(
-            settings,
-            self.generator,
-            actor,
-            actor_opt,
-            critic,
-            critic_opt,
-            return_stats,
-            rollout,
-            pdata,
-            rewards,
+        critic, critic_opt, return_stats = (
+            getattr(self, f"{phase}_{x}") for x in ("critic", "critic_opt", "returns")
         )
+        return ppo_update(
+            settings, self.generator, actor, actor_opt, critic, critic_opt, return_stats,
+            rollout, pdata, rewards,
+        )  # fmt: skip
 
     # ------------------------------------------------------------ checkpoints
     def state_dict(self) -> dict:
         """Critics, their optimisers, return statistics and the noise generator."""
-        return {
-            "jacobian_critic": self.jacobian_critic.state_dict(),
-            "walk_critic": self.walk_critic.state_dict(),
-            "jacobian_critic_opt": self.jacobian_critic_opt.state_dict(),
-            "walk_critic_opt": self.walk_critic_opt.state_dict(),
-            "jacobian_returns": self.jacobian_returns.state_dict(),
-            "walk_returns": self.walk_returns.state_dict(),
-            "generator": self.generator.get_state(),
-        }
+        state = {name: getattr(self, name).state_dict() for name in _PERSISTENT}
+        return {**state, "generator": self.generator.get_state()}
 
     def load_state_dict(self, state: dict) -> None:
         """Restore :meth:`state_dict` (after :meth:`setup`)."""
-        self.jacobian_critic.load_state_dict(state["jacobian_critic"])
-        self.walk_critic.load_state_dict(state["walk_critic"])
-        self.jacobian_critic_opt.load_state_dict(state["jacobian_critic_opt"])
-        self.walk_critic_opt.load_state_dict(state["walk_critic_opt"])
-        self.jacobian_returns.load_state_dict(state["jacobian_returns"])
-        self.walk_returns.load_state_dict(state["walk_returns"])
+        for name in _PERSISTENT:
+            getattr(self, name).load_state_dict(state[name])
         self.generator.set_state(state["generator"])
 
 
