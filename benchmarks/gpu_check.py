@@ -326,7 +326,7 @@ def rollout_syncs(device: str, overrides: list[str], steps: int | None) -> dict[
         "steps": steps,
         "syncs": counted,
         "syncs_per_step": None if counted is None else counted / steps,
-        "reset_depth": collector.torch_env.reset_depth,
+        "reset_depth": collector.env.reset_depth,
         "env_steps_per_second": n * steps / seconds,
     }
 
