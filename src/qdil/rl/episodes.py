@@ -121,9 +121,11 @@ class EpisodePlayer:
             seed = [*seed, *[None] * (n - len(seed))]
         obs, contacts = env.reset(seed, mask=first)
         self.running = torch.from_numpy(first).to(env.device)
-        self.obs, self.contacts = obs[:used].float(), contacts[:used]
+        self.obs = obs[:used].float()
         self.action_map = ActionMap(env.action_low, env.action_high, env.device)
-        self.last_rewards = torch.zeros(used, dtype=torch.float64, device=env.device)
+        # the last step's (N,) rewards and (N, k) contacts, cut to ``used`` when read
+        self._rewards = torch.zeros(n, dtype=torch.float64, device=env.device)
+        self._contacts = contacts
         self._actions = torch.zeros((n, len(env.action_low)), device=env.device)
         self.steps: list[dict[str, torch.Tensor]] = []
         self.active: list[torch.Tensor] = []  # (N,) bool per step: the slots it advanced
@@ -133,6 +135,16 @@ class EpisodePlayer:
     def finished(self) -> bool:
         """Whether every slot's episode has ended (a read on the host)."""
         return not bool(self.running.any())
+
+    @property
+    def last_rewards(self) -> torch.Tensor:
+        """(used,) float64 true rewards of the last step (0 for slots that sat out)."""
+        return self._rewards[: self.used]
+
+    @property
+    def contacts(self) -> torch.Tensor:
+        """(used, k) float32 foot contacts of the slots' current states."""
+        return self._contacts[: self.used]
 
     @property
     def returns(self) -> torch.Tensor:
@@ -160,10 +172,9 @@ class EpisodePlayer:
         active = self.running
         step = self.env.step(all_actions, active)
         done = step.done
-        self.running = active & ~done
+        self.running = active ^ done  # an episode ends only where its slot stepped
         self.active.append(active)
-        self.last_rewards = step.reward[:used]  # 0 for slots that sat out
-        next_obs, next_contacts = step.obs[:used].float(), step.contacts[:used]
+        next_obs = step.obs[:used].float()
         if self.record:
             self.steps.append(
                 {
@@ -171,7 +182,7 @@ class EpisodePlayer:
                     "actions": executed,
                     "contacts": self.contacts,
                     "next_obs": next_obs,
-                    "next_contacts": next_contacts,
+                    "next_contacts": step.contacts[:used],
                     "rewards": step.reward[:used].float(),
                     "dones": done[:used].float(),
                     "terminated": step.terminated[:used].float(),
@@ -180,7 +191,7 @@ class EpisodePlayer:
                     "starts": torch.full((used,), float(not self.steps), device=executed.device),
                 }
             )
-        self.obs, self.contacts = next_obs, next_contacts
+        self.obs, self._contacts, self._rewards = next_obs, step.contacts, step.reward
         self.num_steps += 1
 
     def rollout(self, first: int = 0, stop: int | None = None, rows: slice = ALL) -> Rollout | None:
