@@ -116,7 +116,6 @@ class HostFace:
             final_obs=final_obs,
             reward=torch.from_numpy(reward),
             terminated=torch.from_numpy(terminated),
-            truncated=torch.from_numpy(truncated),
             done=torch.from_numpy(terminated | truncated),
             contacts=contacts_t,
             final_contacts=final_contacts,

@@ -28,8 +28,7 @@ class TorchStep(NamedTuple):
         final_obs: float64 observations of the states the step reached (before a reset).
         reward: float64 true rewards (0 for sub-environments left out of the step).
         terminated: bool, the episode ended because the robot is unhealthy.
-        truncated: bool, the episode reached ``max_episode_steps``.
-        done: bool, terminated or truncated.
+        done: bool, the episode ended: terminated, or truncated at ``max_episode_steps``.
         contacts: float32 0/1 foot-contact flags of ``obs``'s states.
         final_contacts: float32 foot-contact flags of ``final_obs``'s states.
         episode_return: float64 true return of the episodes that ended (0 elsewhere).
@@ -41,7 +40,6 @@ class TorchStep(NamedTuple):
     final_obs: torch.Tensor
     reward: torch.Tensor
     terminated: torch.Tensor
-    truncated: torch.Tensor
     done: torch.Tensor
     contacts: torch.Tensor
     final_contacts: torch.Tensor

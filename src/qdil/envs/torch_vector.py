@@ -219,7 +219,6 @@ class TorchVectorEnv:
             final_obs=final_obs,
             reward=reward,
             terminated=terminated,
-            truncated=truncated,
             done=done,
             contacts=contacts,
             final_contacts=final_contacts,
