@@ -54,7 +54,8 @@ class TorchFace(Protocol):
     Attributes:
         num_envs: sub-environments N.
         num_feet: measures k.
-        device: where the step's tensors are (the physics' device).
+        device: where the step's tensors are (the physics' device; the host's for the C
+            engine's numpy arrays).
         action_low: (A,) lower action bounds.
         action_high: (A,) upper action bounds.
         autoreset: whether a finished sub-environment resets within its step

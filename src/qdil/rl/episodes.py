@@ -174,7 +174,7 @@ class EpisodePlayer:
         done = step.done
         self.running = active ^ done  # an episode ends only where its slot stepped
         self.active.append(active)
-        next_obs = step.obs[:used].float()
+        next_obs = (step.obs if used == self.env.num_envs else step.obs[:used]).float()
         if self.record:
             self.steps.append(
                 {
@@ -289,12 +289,12 @@ def evaluate_groups(
     samplers = [PolicySampler(group.actor, group.stats, obs_clip) for group in groups]
 
     def policy(obs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]:
+        if len(groups) == 1:
+            return samplers[0].sample(obs, groups[0].generator, deterministic, log_probs=record)
         outputs = [
             sampler.sample(obs[rows], group.generator, deterministic, log_probs=record)
             for sampler, group, rows in zip(samplers, groups, bounds, strict=True)
         ]
-        if len(outputs) == 1:
-            return outputs[0]
         norm, actions, log_probs = zip(*outputs, strict=True)
         joined = torch.cat(log_probs) if record else None  # type: ignore[arg-type]
         return torch.cat(norm), torch.cat(actions), joined
