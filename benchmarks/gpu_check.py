@@ -21,7 +21,12 @@ measures, in steady state (kernels compiled and Warp graphs recorded before any 
    records graphs and builds the reward model's optimiser state), then the same with θ_μ
    and its branches scored one after the other (``--env.eval_envs 3000``) as the baseline
    of scoring them side by side;
-4. the GPU tests (``pytest -m gpu -n 0 tests/test_gpu.py tests/envs/test_warp_backend.py``).
+4. the same two QD iterations as ``--runs`` separate ``qdil fit`` processes at once (seeds
+   0, 1, ...) sharing the card, each run's seconds per iteration against the one run of
+   step 3: what several seeds side by side cost;
+5. the GPU tests (``pytest -m gpu -n 0 tests/test_gpu.py tests/envs/test_warp_backend.py``).
+
+The probes below a QD iteration (steps 0 to 2) live in ``benchmarks/gpu_probes.py``.
 
 It writes ``gpu_check.json`` (after every step, so a check cut short keeps what it
 measured) and ``gpu_check.md``, the tables of docs/guides/gpu.md. ``--device cpu --quick``
@@ -35,21 +40,29 @@ import argparse
 import csv
 import json
 import os
-import platform
 import shlex
+import shutil
 import subprocess
 import sys
 import tempfile
 import time
 import traceback
-import warnings
 import xml.etree.ElementTree as ElementTree
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # gpu_probes, beside this file
+from gpu_probes import (
+    RECIPE,
+    frame_skip_floor,
+    machine,
+    rollout_syncs,
+    rollout_throughput,
+    step_breakdown,
+)
+
 ROOT = Path(__file__).resolve().parents[1]
-RECIPE = ROOT / "recipes" / "gpu" / "walker_mcwae.yaml"
 GPU_TESTS = ["tests/test_gpu.py", "tests/envs/test_warp_backend.py"]
 PHASES = ("jacobian", "walk", "evaluate", "reward_update")
 # the same recipe, scaled down for Warp's CPU device (--quick): every phase still runs
@@ -60,275 +73,6 @@ QUICK = [
     "--rl.init_args.update_epochs", "1", "--qd.emitter.init_args.batch_size", "3",
     "--qd.branch_episodes", "1", "--qd.mean_episodes", "3", "--reward.init_args.batch_size", "1000",
 ]  # fmt: skip
-
-
-def _sync(device: str) -> Callable[[], None]:
-    import torch
-
-    return torch.cuda.synchronize if device.startswith("cuda") else lambda: None
-
-
-def machine(device: str) -> dict[str, Any]:
-    """The card, the host and the versions every figure depends on."""
-    import mujoco
-    import torch
-
-    from qdil.envs.warp_physics import import_warp
-
-    warp, mjw = import_warp()
-    card = torch.cuda.get_device_name(device) if device.startswith("cuda") else "Warp CPU device"
-    versions = {
-        "torch": torch.__version__,
-        "warp": warp.config.version,
-        "mujoco": mujoco.__version__,
-    }
-    versions["mujoco_warp"] = getattr(mjw, "__version__", "unknown")
-    return {
-        "card": card,
-        "cuda": torch.version.cuda,
-        "cpu": platform.processor() or platform.machine(),
-        "cores": os.cpu_count(),
-        "python": platform.python_version(),
-        "versions": versions,
-    }
-
-
-def rollout_throughput(device: str, sizes: list[int], steps: int) -> dict[str, float]:
-    """env-steps/s of the rollouts' face, random actions, autoreset on, after a warm-up."""
-    import torch
-
-    from qdil.envs.torch_vector import TorchVectorEnv
-    from qdil.envs.vector import LocomotionVectorEnv
-
-    sync, result = _sync(device), {}
-    for n in sizes:
-        env = LocomotionVectorEnv(
-            "Walker2d-v5", n, autoreset_mode="SameStep", backend="warp", device=device
-        )
-        face = TorchVectorEnv(env)
-        face.reset(seed=0)
-        generator = torch.Generator(device=face.device).manual_seed(0)
-        dim = env.single_action_space.shape[0]
-        actions = [
-            torch.rand((n, dim), generator=generator, device=face.device) * 2 - 1 for _ in range(8)
-        ]
-        # warm-up past a reset-queue top-up: compiles kernels and records the Warp graphs
-        for i in range(face.reset_depth + 2):
-            face.step(actions[i % 8])
-        sync()
-        start = time.perf_counter()
-        for i in range(steps):
-            face.step(actions[i % 8])
-        sync()
-        result[str(n)] = steps * n / (time.perf_counter() - start)
-        del face, env
-    return result
-
-
-class LaunchCount:
-    """Counts Warp kernel launches (``warp.launch``/``launch_tiled``) made from Python."""
-
-    def __enter__(self) -> LaunchCount:
-        import warp
-
-        self.count, self._warp = 0, warp
-        self._saved = {name: getattr(warp, name) for name in ("launch", "launch_tiled")}
-        for name, launch in self._saved.items():
-            setattr(warp, name, self._counted(launch))
-        return self
-
-    def _counted(self, launch: Callable) -> Callable:
-        def counted(*args: Any, **kwargs: Any) -> Any:
-            self.count += 1
-            return launch(*args, **kwargs)
-
-        return counted
-
-    def __exit__(self, *exc: object) -> None:
-        for name, launch in self._saved.items():
-            setattr(self._warp, name, launch)
-
-
-def torch_ops(call: Callable[[], Any]) -> int:
-    """Torch operators ``call`` dispatches (on a GPU, about one kernel launch each)."""
-    from torch.utils._python_dispatch import TorchDispatchMode
-
-    class Count(TorchDispatchMode):
-        count = 0
-
-        def __torch_dispatch__(self, func, types, args=(), kwargs=None):
-            Count.count += 1
-            return func(*args, **(kwargs or {}))
-
-    with Count():
-        call()
-    return Count.count
-
-
-def step_breakdown(device: str, n: int, repeats: int) -> dict[str, Any]:
-    """Where a training env step's time goes at N simulations, and what it launches.
-
-    Each Warp sequence of the torch face's step (the frame skip's substeps, the sensor
-    pass, the autoreset's reset and its observed stages of ``forward``; MuJoCo Warp's whole
-    ``forward``, which autoresets ran before, for comparison) is replayed ``repeats``
-    times from its graph and timed; the whole face step and a collector step too. Warp
-    launches are counted with each sequence launched once from Python, torch operators
-    per collector step as the difference of a 2-step and a 1-step rollout.
-    """
-    import torch
-
-    from qdil.envs.torch_vector import TorchVectorEnv
-    from qdil.envs.vector import LocomotionVectorEnv
-    from qdil.rl.collect import Collector
-    from qdil.rl.networks import VectorizedActor
-    from qdil.rl.normalize import RunningMeanStd
-
-    sync = _sync(device)
-    env = LocomotionVectorEnv(
-        "Walker2d-v5", n, autoreset_mode="SameStep", backend="warp", device=device
-    )
-    face = TorchVectorEnv(env)
-    face.reset(seed=0)
-    physics, task = env.physics, env.task
-    generator = torch.Generator(device=face.device).manual_seed(0)
-    dim = env.single_action_space.shape[0]
-    actions = torch.rand((n, dim), generator=generator, device=face.device) * 2 - 1
-    for _ in range(face.reset_depth + 2):  # compile and record every graph
-        face.step(actions)
-    mjw, m, d = physics.mjw, physics.wmodel, physics.wdata
-    sequences: dict[str, tuple[tuple, Callable[[], None]]] = {
-        "substeps": (("step", task.frame_skip), lambda: physics._substeps(task.frame_skip)),
-        "sensors": (("sensors",), physics._sensor_pass),
-        "reset": (("reset",), lambda: mjw.reset_data(m, d, reset=physics._reset_mask)),
-        "observed": (("observed",), physics._observed_stages),
-        "forward": (("forward",), lambda: mjw.forward(m, d)),
-    }
-    result: dict[str, Any] = {"num_envs": n, "repeats": repeats, "ms": {}, "warp_launches": {}}
-    with physics._on_torch_stream():
-        for name, (key, launches) in sequences.items():
-            physics._launch(key, launches)  # records the graph if not yet recorded
-            with LaunchCount() as counter:
-                launches()
-            result["warp_launches"][name] = counter.count
-            sync()
-            start = time.perf_counter()
-            for _ in range(repeats):
-                physics._launch(key, launches)
-            sync()
-            result["ms"][name] = 1e3 * (time.perf_counter() - start) / repeats
-    niter = torch.as_tensor(d.solver_niter.numpy()).double()
-    result["solver_iterations"] = {"mean": float(niter.mean()), "max": float(niter.max())}
-    sync()
-    start = time.perf_counter()
-    for _ in range(repeats):
-        face.step(actions)
-    sync()
-    result["ms"]["face_step"] = 1e3 * (time.perf_counter() - start) / repeats
-    result["torch_ops"] = {"face_step": torch_ops(lambda: face.step(actions))}
-
-    collector = Collector(TorchVectorEnv(env, reset_depth=face.reset_depth))
-    obs_dim = env.single_observation_space.shape[0]
-    actor = VectorizedActor(3, obs_dim, dim).to(face.device)
-    stats = RunningMeanStd(3, (obs_dim,), device=face.device)
-    collector.start(seed=1)
-
-    def collect(steps: int) -> Any:
-        return collector.collect(actor, stats, steps, generator, update_stats=False)
-
-    collect(face.reset_depth + 2)
-    per_rollout = [torch_ops(lambda t=t: collect(t)) for t in (1, 2)]
-    result["torch_ops"]["collect_step"] = per_rollout[1] - per_rollout[0]
-    steps = max(repeats, 2)
-    sync()
-    start = time.perf_counter()
-    collect(steps)
-    sync()
-    result["ms"]["collect_step"] = 1e3 * (time.perf_counter() - start) / steps
-    return result
-
-
-def frame_skip_floor(device: str, sizes: list[int], repeats: int) -> dict[str, float]:
-    """ms of one frame skip of Walker2d replayed from its Warp graph, zero actions, per N.
-
-    With a single simulation this is the cost of the kernels themselves (launch latency),
-    which no batch size lowers.
-    """
-    import torch
-
-    from qdil.envs.torch_vector import TorchVectorEnv
-    from qdil.envs.vector import LocomotionVectorEnv
-
-    sync, result = _sync(device), {}
-    for n in sizes:
-        env = LocomotionVectorEnv(
-            "Walker2d-v5", n, autoreset_mode="SameStep", backend="warp", device=device
-        )
-        face = TorchVectorEnv(env)
-        face.reset(seed=0)
-        zeros = torch.zeros((n, env.single_action_space.shape[0]), device=face.device)
-        for _ in range(face.reset_depth + 2):
-            face.step(zeros)
-        physics = env.physics
-        graph = physics._graphs.get(("step", env.task.frame_skip))
-        with physics._on_torch_stream():
-            sync()
-            start = time.perf_counter()
-            for _ in range(repeats):
-                if graph is None:
-                    physics._substeps(env.task.frame_skip)
-                else:
-                    physics.warp.capture_launch(graph)
-            sync()
-        result[str(n)] = 1e3 * (time.perf_counter() - start) / repeats
-        del face, env
-    return result
-
-
-def rollout_syncs(device: str, overrides: list[str], steps: int | None) -> dict[str, Any]:
-    """Host syncs in one training rollout of the recipe's size (CUDA only: torch counts them)."""
-    import torch
-
-    from qdil.cli.fit import build, fit_parser, parse_fit
-    from qdil.rl.normalize import RunningMeanStd
-
-    with tempfile.TemporaryDirectory() as folder:
-        argv = [str(RECIPE), "--env.device", device, "--logging.wandb", "disabled", *overrides]
-        config, _, _ = parse_fit(argv)
-        config.name = "gpu_check"
-        run = build(fit_parser().instantiate(config), "gpu_check", Path(folder), "", resume=False)
-        vppo, collector = run.vppo, run.vppo.executor.collector
-        steps = steps or vppo.rollout_length
-        actor = vppo._actor(vppo.initial_solution(0)[None].repeat(vppo.num_objectives, 0))
-        stats = RunningMeanStd(vppo.num_objectives, (vppo.obs_dim,), device=collector.device)
-        collector.start(seed=0)
-        # the first rollout records the graphs; the second is the one counted
-        collector.collect(actor, stats, steps, vppo.generator, update_stats=True)
-        counted = None
-        cuda = device.startswith("cuda")
-        if cuda:
-            torch.cuda.synchronize()
-            torch.cuda.set_sync_debug_mode("warn")
-        try:
-            with warnings.catch_warnings(record=True) as caught:
-                warnings.simplefilter("always")
-                start = time.perf_counter()
-                collector.collect(actor, stats, steps, vppo.generator, update_stats=True)
-                _sync(device)()
-                seconds = time.perf_counter() - start
-        finally:
-            if cuda:
-                torch.cuda.set_sync_debug_mode("default")
-        if cuda:
-            counted = sum("synchroniz" in str(w.message) for w in caught)
-        n = collector.env.num_envs
-    return {
-        "num_envs": n,
-        "steps": steps,
-        "syncs": counted,
-        "syncs_per_step": None if counted is None else counted / steps,
-        "reset_depth": collector.env.reset_depth,
-        "env_steps_per_second": n * steps / seconds,
-    }
 
 
 def qd_iterations(device: str, overrides: list[str], iterations: int) -> list[dict[str, float]]:
@@ -343,16 +87,76 @@ def qd_iterations(device: str, overrides: list[str], iterations: int) -> list[di
             argv += ["--qd.iterations", str(iterations), "--name", "gpu_check"]
             argv += ["--logging.wandb", "disabled", "--logging.progress", "false"]
             main(argv)
-            with open(Path(folder) / "runs" / "gpu_check" / "metrics.csv", newline="") as file:
-                rows = list(csv.DictReader(file))
+            rows = _metrics(Path(folder) / "runs" / "gpu_check" / "metrics.csv")
         finally:
             os.chdir(here)
+    return rows
+
+
+def _metrics(path: Path) -> list[dict[str, float]]:
+    """Each iteration's seconds per phase, env steps and env-steps/s from a ``metrics.csv``."""
+    with open(path, newline="") as file:
+        rows = list(csv.DictReader(file))
     keep = ["iter_seconds", "env_steps", "sps", *(f"{p}_seconds" for p in PHASES)]
     return [
         {key: float(row[f"perf/{key}"]) for key in keep if row.get(f"perf/{key}", "") != ""}
         | {"iteration": int(row["iteration"])}
         for row in rows
     ]
+
+
+def _gpu_memory_mib() -> float | None:
+    """Memory in use on the first GPU, as ``nvidia-smi`` reports it (None without one)."""
+    if shutil.which("nvidia-smi") is None:
+        return None
+    query = ["nvidia-smi", "--query-gpu=memory.used", "--format=csv,noheader,nounits"]
+    done = subprocess.run(query, capture_output=True, text=True, timeout=10)
+    return float(done.stdout.split()[0]) if done.returncode == 0 and done.stdout else None
+
+
+def runs_side_by_side(
+    device: str, overrides: list[str], runs: int, iterations: int, timeout: float
+) -> dict[str, Any]:
+    """``runs`` separate ``qdil fit`` processes of the recipe at once, seeds 0, 1, ...
+
+    Each is its own process with its own CUDA context, as a researcher would start seeds;
+    the card's memory in use is polled while they run.
+    """
+    with tempfile.TemporaryDirectory() as folder:
+        processes = []
+        for seed in range(runs):
+            argv = [sys.executable, "-m", "qdil.cli", "fit", str(RECIPE), "--env.device", device]
+            argv += [*overrides, "--qd.iterations", str(iterations), "--seed", str(seed)]
+            argv += ["--name", f"seed{seed}", "--logging.wandb", "disabled"]
+            argv += ["--logging.progress", "false"]
+            log = open(Path(folder) / f"seed{seed}.log", "w")  # noqa: SIM115 (closed below)
+            processes.append((subprocess.Popen(argv, cwd=folder, stdout=log, stderr=log), log))
+        start, memory = time.perf_counter(), []
+        while any(p.poll() is None for p, _ in processes):
+            if time.perf_counter() - start > timeout:
+                for p, _ in processes:
+                    p.kill()
+                break
+            memory.append(_gpu_memory_mib())
+            time.sleep(1.0)
+        seconds = time.perf_counter() - start
+        for _, log in processes:
+            log.close()
+        failed = {
+            seed: (Path(folder) / f"seed{seed}.log").read_text()[-2000:]
+            for seed, (p, _) in enumerate(processes)
+            if p.wait() != 0
+        }
+        if failed:
+            raise RuntimeError(f"runs side by side failed: {failed}")
+        rows = [_metrics(Path(folder) / "runs" / f"seed{s}" / "metrics.csv") for s in range(runs)]
+    used = [m for m in memory if m is not None]
+    return {
+        "runs": runs,
+        "seconds": seconds,
+        "iterations": rows,
+        "gpu_memory_mib_max": max(used) if used else None,
+    }
 
 
 def gpu_tests(timeout: float) -> dict[str, Any]:
@@ -430,6 +234,25 @@ def markdown(result: dict[str, Any]) -> str:
             cells.append(f"{row.get('sps', float('nan')):,.0f}")
             lines.append("| " + " | ".join(cells) + " |")
         lines.append("")
+    if "side_by_side" in result:
+        side = result["side_by_side"]
+        alone = {row["iteration"]: row["iter_seconds"] for row in result.get("iterations", [])}
+        memory = side["gpu_memory_mib_max"]
+        lines += [
+            f"{side['runs']} runs at once (separate processes, seeds 0 to {side['runs'] - 1}"
+            + (f", at most {memory:,.0f} MiB of GPU memory in use" if memory else "")
+            + "):",
+            "",
+            "| iteration | one run alone, s | "
+            + " | ".join(f"seed {s}, s" for s in range(side["runs"]))
+            + " |",
+            "|" + "---|" * (side["runs"] + 2),
+        ]
+        for i, row in enumerate(side["iterations"][0]):
+            cells = [str(row["iteration"]), f"{alone.get(row['iteration'], float('nan')):.1f}"]
+            cells += [f"{rows[i]['iter_seconds']:.1f}" for rows in side["iterations"]]
+            lines.append("| " + " | ".join(cells) + " |")
+        lines.append("")
     if "tests" in result:
         lines += ["| GPU test | result |", "|---|---|"]
         lines += [f"| `{name}` | {o} |" for name, o in result["tests"]["outcomes"].items()]
@@ -446,6 +269,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     parser.add_argument("--out", type=Path, default=Path("gpu_check"), help="output folder")
     parser.add_argument("--budget", type=float, default=480.0, help="seconds for all steps")
     parser.add_argument("--skip", default="", help="comma-separated steps to leave out")
+    parser.add_argument("--runs", type=int, default=2, help="runs at once for side_by_side")
     parser.add_argument(
         "--set", default="", help="more `qdil fit` overrides, e.g. --set='--bonus.enabled false'"
     )
@@ -476,6 +300,9 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         # the same iterations with θ_μ and its branches scored one after the other
         "iterations_in_turns": lambda: qd_iterations(
             args.device, [*overrides, "--env.eval_envs", str(turns)], 2
+        ),
+        "side_by_side": lambda: runs_side_by_side(
+            args.device, overrides, args.runs, 2, args.budget - 45 - (time.perf_counter() - start)
         ),
         "tests": lambda: gpu_tests(args.budget - (time.perf_counter() - start)),
     }

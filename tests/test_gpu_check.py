@@ -40,18 +40,24 @@ def test_the_check_runs_every_step_on_the_cpu(tmp_path: Path, monkeypatch) -> No
     assert [row["iteration"] for row in saved["iterations"]] == [1, 2]
     for row in saved["iterations"]:
         assert {"jacobian_seconds", "walk_seconds", "evaluate_seconds"} <= set(row)
+    # two seeds at once, each its own `qdil fit` process, both through two iterations
+    side = saved["side_by_side"]
+    assert side["runs"] == 2 and side["gpu_memory_mib_max"] is None  # no nvidia-smi here
+    assert [[row["iteration"] for row in rows] for rows in side["iterations"]] == [[1, 2]] * 2
+    assert all(row["iter_seconds"] > 0 for rows in side["iterations"] for row in rows)
     # the GPU tests skip without CUDA, and the check says so rather than failing
     outcomes = saved["tests"]["outcomes"]
     assert outcomes and set(outcomes.values()) == {"skipped"}
     table = (tmp_path / "out" / "gpu_check.md").read_text()
     assert "| 6 |" in table and "| 2 |" in table and "skipped" in table
+    assert "2 runs at once" in table
 
 
 def test_a_failed_step_is_reported_and_the_others_still_run(tmp_path: Path) -> None:
     result = _gpu_check().main(
         [
             *("--device", "cpu", "--quick", "--out", str(tmp_path)),
-            *("--skip", "breakdown,floor,throughput,iterations_in_turns,tests"),
+            *("--skip", "breakdown,floor,throughput,iterations_in_turns,side_by_side,tests"),
             "--set=--env.num_envs 5",  # not divisible by Walker2d's k + 1 = 3
         ]
     )
