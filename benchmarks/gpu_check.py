@@ -131,9 +131,10 @@ def runs_side_by_side(
             argv += ["--logging.progress", "false"]
             log = open(Path(folder) / f"seed{seed}.log", "w")  # noqa: SIM115 (closed below)
             processes.append((subprocess.Popen(argv, cwd=folder, stdout=log, stderr=log), log))
-        start, memory = time.perf_counter(), []
+        start, memory, timed_out = time.perf_counter(), [], False
         while any(p.poll() is None for p, _ in processes):
-            if time.perf_counter() - start > timeout:
+            if time.perf_counter() - start > timeout:  # keep what the runs recorded so far
+                timed_out = True
                 for p, _ in processes:
                     p.kill()
                 break
@@ -145,15 +146,17 @@ def runs_side_by_side(
         failed = {
             seed: (Path(folder) / f"seed{seed}.log").read_text()[-2000:]
             for seed, (p, _) in enumerate(processes)
-            if p.wait() != 0
+            if p.wait() != 0 and not timed_out
         }
         if failed:
             raise RuntimeError(f"runs side by side failed: {failed}")
-        rows = [_metrics(Path(folder) / "runs" / f"seed{s}" / "metrics.csv") for s in range(runs)]
+        metrics = [Path(folder) / "runs" / f"seed{s}" / "metrics.csv" for s in range(runs)]
+        rows = [_metrics(path) if path.exists() else [] for path in metrics]
     used = [m for m in memory if m is not None]
     return {
         "runs": runs,
         "seconds": seconds,
+        "timed_out": timed_out,
         "iterations": rows,
         "gpu_memory_mib_max": max(used) if used else None,
     }
@@ -169,6 +172,8 @@ def gpu_tests(timeout: float) -> dict[str, Any]:
         done = subprocess.run(
             command, cwd=ROOT, capture_output=True, text=True, timeout=max(timeout, 1)
         )
+        if not report.exists():  # pytest stopped before running a test (a usage or import error)
+            raise RuntimeError(f"pytest ran no test: {(done.stdout + done.stderr)[-3000:]}")
         outcomes = {}
         for case in ElementTree.parse(report).getroot().iter("testcase"):
             found = [child.tag for child in case if child.tag in ("failure", "error", "skipped")]
@@ -248,10 +253,15 @@ def markdown(result: dict[str, Any]) -> str:
             + " |",
             "|" + "---|" * (side["runs"] + 2),
         ]
-        for i, row in enumerate(side["iterations"][0]):
-            cells = [str(row["iteration"]), f"{alone.get(row['iteration'], float('nan')):.1f}"]
-            cells += [f"{rows[i]['iter_seconds']:.1f}" for rows in side["iterations"]]
+        done = {row["iteration"]: row for rows in side["iterations"] for row in rows}
+        for iteration in sorted(done):
+            cells = [str(iteration), f"{alone.get(iteration, float('nan')):.1f}"]
+            for rows in side["iterations"]:
+                seconds = {row["iteration"]: row["iter_seconds"] for row in rows}
+                cells.append(f"{seconds[iteration]:.1f}" if iteration in seconds else "not reached")
             lines.append("| " + " | ".join(cells) + " |")
+        if side["timed_out"]:
+            lines.append(f"\nStopped by the check's budget after {side['seconds']:.0f} s.")
         lines.append("")
     if "tests" in result:
         lines += ["| GPU test | result |", "|---|---|"]

@@ -75,9 +75,15 @@ def test_a_rollout_does_not_sync_with_the_host_per_step(tmp_path: Path) -> None:
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            collector.collect(actor, stats, steps, vppo.generator, update_stats=True)
+            rollout, extras = collector.collect(
+                actor, stats, steps, vppo.generator, update_stats=True
+            )
     finally:
         torch.cuda.set_sync_debug_mode("default")
+    # every field the rollout hands on lives on the GPU (a CPU `valid` mask once broke the
+    # bonus's visit counts there, and no CPU test can see it)
+    fields = {**vars(rollout), **vars(extras)}
+    assert [k for k, t in fields.items() if torch.is_tensor(t) and not t.is_cuda] == []
     syncs = [w for w in caught if "synchroniz" in str(w.message)]
     # the reset-noise queues are topped up every `depth` steps; nothing else syncs
     assert len(syncs) <= steps // depth, [str(w.message) for w in syncs]

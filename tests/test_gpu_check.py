@@ -42,7 +42,8 @@ def test_the_check_runs_every_step_on_the_cpu(tmp_path: Path, monkeypatch) -> No
         assert {"jacobian_seconds", "walk_seconds", "evaluate_seconds"} <= set(row)
     # two seeds at once, each its own `qdil fit` process, both through two iterations
     side = saved["side_by_side"]
-    assert side["runs"] == 2 and side["gpu_memory_mib_max"] is None  # no nvidia-smi here
+    assert side["runs"] == 2 and not side["timed_out"]
+    assert side["gpu_memory_mib_max"] is None  # no nvidia-smi here
     assert [[row["iteration"] for row in rows] for rows in side["iterations"]] == [[1, 2]] * 2
     assert all(row["iter_seconds"] > 0 for rows in side["iterations"] for row in rows)
     # the GPU tests skip without CUDA, and the check says so rather than failing
@@ -65,3 +66,12 @@ def test_a_failed_step_is_reported_and_the_others_still_run(tmp_path: Path) -> N
     assert "Traceback" in result["tracebacks"]["iterations"]
     assert result["machine"]["card"] == "Warp CPU device"
     assert "- iterations failed:" in (tmp_path / "gpu_check.md").read_text()
+
+
+def test_runs_side_by_side_cut_by_the_budget_keep_what_they_recorded(tmp_path: Path) -> None:
+    check = _gpu_check()
+    side = check.runs_side_by_side("cpu", check.QUICK, runs=2, iterations=2, timeout=1.0)
+    assert side["timed_out"] and side["seconds"] < 30
+    assert side["iterations"] == [[], []]  # no iteration finishes in a second; no error either
+    table = check.markdown({"command": "gpu_check", "side_by_side": side})
+    assert "Stopped by the check's budget" in table

@@ -250,7 +250,7 @@ def finish_rollout(
     """
     buf = steps.buffers
     num_steps, n, obs_dim = buf["obs"].shape
-    rollout = Rollout(**buf, valid=torch.ones((num_steps, n)))
+    rollout = Rollout(**buf, valid=torch.ones((num_steps, n), device=buf["obs"].device))
     next_by_policy = policy_blocks(buf["next_obs"].transpose(0, 1), num_policies).flatten(1, 2)
     norm_next = stats.normalize(next_by_policy, clip=obs_clip)
     norm_next = norm_next.reshape(n, num_steps, obs_dim).transpose(0, 1)
