@@ -12,7 +12,7 @@ import numpy as np
 from typing_extensions import override
 
 from qdil.envs.arrays import constant, namespace
-from qdil.envs.physics import Export
+from qdil.envs.physics_base import Export
 from qdil.envs.task_base import Arrays, LocomotionTask, check_range
 
 

@@ -18,7 +18,7 @@ import mujoco
 import numpy as np
 
 from qdil.envs.arrays import namespace
-from qdil.envs.physics import Export
+from qdil.envs.physics_base import Export
 
 _ASSETS = Path(gymnasium.__file__).parent / "envs" / "mujoco" / "assets"
 
