@@ -1,4 +1,5 @@
-"""The README's commands and CI stay in step."""
+"""Rules of the repository: the README's commands and CI stay in step, report records are
+committable, and every Python file stays short."""
 
 from __future__ import annotations
 
@@ -43,3 +44,26 @@ def test_report_records_are_not_ignored_by_git() -> None:
     assert kept.returncode == 1, f"{record} is ignored by .gitignore"
     run_dir = subprocess.run(["git", "check-ignore", "-q", "runs/any-run"], cwd=ROOT, check=False)
     assert run_dir.returncode == 0, "run directories at the root should stay ignored"
+
+
+MAX_LINES = 400
+"""A Python file of this many lines or more is split by concept (the style guide's target)."""
+
+
+def test_every_python_file_is_under_400_lines() -> None:
+    if shutil.which("git") is None or not (ROOT / ".git").exists():
+        pytest.skip("needs git and a checkout")
+    listed = subprocess.run(
+        ["git", "ls-files", "-z", "--", "src", "tests", "benchmarks"],
+        cwd=ROOT,
+        check=True,
+        capture_output=True,
+        text=True,
+    ).stdout.split("\0")
+    paths = [ROOT / name for name in listed if name.endswith(".py") and (ROOT / name).exists()]
+    long = {
+        str(path.relative_to(ROOT)): count
+        for path in paths
+        if (count := len(path.read_text().splitlines())) >= MAX_LINES
+    }
+    assert not long, f"split these files by concept (lines): {long}"

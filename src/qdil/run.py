@@ -8,9 +8,11 @@ from typing import Any
 import lightning as L
 import numpy as np
 import torch
+from ribs.archives import GridArchive
 from ribs.schedulers import Scheduler
 
 from qdil.config import BonusConfig, DemoConfig, EnvConfig, LoggingConfig, QDConfig, RewardFactory
+from qdil.demos.dataset import DemoSet
 from qdil.demos.io import load_demos
 from qdil.devices import DEVICE_BACKENDS, fabric_settings
 from qdil.envs.vector import LocomotionVectorEnv
@@ -50,6 +52,175 @@ def with_bonus(model: RewardModel, bonus: BonusConfig, archives: RunArchives) ->
     )
 
 
+def _environment(
+    env: EnvConfig, size: int, autoreset_mode: str, device: str | torch.device
+) -> LocomotionVectorEnv:
+    """``size`` batched simulations of the recipe's task, on its backend and ``device``.
+
+    Args:
+        env: The recipe's ``env`` section.
+        size: How many simulations the batch holds.
+        autoreset_mode: ``"SameStep"`` for training rollouts, ``"Disabled"`` for
+            evaluation episodes.
+        device: ``env.device`` for the first environment; the checked ``torch.device``
+            it exposes for every later one.
+
+    Raises:
+        ValueError: for a backend or device the run cannot use, naming ``env.device``.
+    """
+    return LocomotionVectorEnv(
+        env.task,
+        size,
+        max_episode_steps=env.max_episode_steps,
+        autoreset_mode=autoreset_mode,
+        num_threads=env.num_threads,
+        backend=env.backend,
+        device=device,
+        **env.task_kwargs,
+    )
+
+
+def _archives(qd: QDConfig, solution_dim: int, obs_dim: int, k: int, seed: int) -> RunArchives:
+    """The run's three grid archives over ``k`` foot-contact measures.
+
+    Args:
+        qd: The recipe's ``qd`` section (cells per measure, CMA-MAE's learning rate and
+            threshold).
+        solution_dim: Length of a policy's flat parameter vector.
+        obs_dim: Observation size (the elites keep their observation statistics).
+        k: Number of measures (feet).
+        seed: Seeds the three archives, in the order main, true, deployable.
+    """
+    fields = elite_fields(obs_dim)
+    cells = [qd.cells] * k
+    archive_seeds = np.random.SeedSequence(seed).generate_state(3)
+    return RunArchives(
+        main=make_grid(
+            solution_dim=solution_dim,
+            cells=cells,
+            extra_fields=fields,
+            learning_rate=qd.archive_learning_rate,
+            threshold_min=qd.threshold_min,
+            seed=int(archive_seeds[0]),
+        ),
+        true=make_grid(
+            solution_dim=solution_dim, cells=cells, extra_fields=fields, seed=int(archive_seeds[1])
+        ),
+        deployable=make_grid(
+            solution_dim=solution_dim,
+            cells=cells,
+            extra_fields=deployable_fields(obs_dim),
+            seed=int(archive_seeds[2]),
+        ),
+    )
+
+
+def _search(
+    qd: QDConfig, main: GridArchive, x0: np.ndarray, obs_dim: int, seed: int
+) -> tuple[PPGAEmitter, Scheduler]:
+    """The PPGA emitter that walks from ``x0`` and the pyribs scheduler over ``main``.
+
+    Args:
+        qd: The recipe's ``qd`` section (an emitter or scheduler other than the default).
+        main: The CMA-MAE archive the emitter and scheduler insert into.
+        x0: The first search policy, a ``(solution_dim,)`` array.
+        obs_dim: Observation size: θ's observation statistics start empty.
+        seed: The emitter's seed.
+
+    Raises:
+        ValueError: for a ``qd.emitter`` that is not PPGA-style.
+    """
+    theta_stats = RunningMeanStd(1, (obs_dim,))
+    emitter = (PPGAEmitter if qd.emitter is None else qd.emitter)(main, x0, seed=seed)
+    if not hasattr(emitter, "theta_fields"):
+        raise ValueError(
+            "qd.emitter must be a PPGA-style emitter with theta, theta_fields and "
+            "coefficient_mean (e.g. qdil.qd.PPGAEmitter)"
+        )
+    emitter.theta_fields = {
+        "obs_mean": theta_stats.mean[0].numpy(),
+        "obs_var": theta_stats.var[0].numpy(),
+        "obs_count": theta_stats.count[0].numpy(),
+    }
+    scheduler = (
+        Scheduler(main, [emitter], add_mode="batch")
+        if qd.scheduler is None
+        else qd.scheduler(main, [emitter])
+    )
+    return emitter, scheduler
+
+
+def _eval_size(env: EnvConfig, qd: QDConfig, emitter: PPGAEmitter) -> int:
+    """How many simulations the evaluation environment holds (``env.eval_envs`` if set).
+
+    A device scores θ_μ and the branches side by side (fewer steps in sequence); the C
+    engine plays them one after the other, so its environment fits the larger of the two.
+    """
+    branch_slots = emitter.batch_size * qd.branch_episodes
+    if env.eval_envs:
+        return env.eval_envs
+    if env.backend in DEVICE_BACKENDS:
+        return branch_slots + qd.mean_episodes
+    return max(branch_slots, qd.mean_episodes)
+
+
+def _reward_model(
+    reward: RewardFactory,
+    bonus: BonusConfig,
+    archives: RunArchives,
+    train_env: LocomotionVectorEnv,
+) -> tuple[RewardModel, list[torch.optim.Optimizer], L.Fabric]:
+    """The recipe's reward model set up with Lightning Fabric, its bonus wrapped around it.
+
+    Args:
+        reward: Builds the model from the observation, action and measure sizes.
+        bonus: The recipe's ``bonus`` section.
+        archives: The run's archives (the EBC bonus reads the main one).
+        train_env: The training environment: its sizes and device.
+
+    Returns:
+        The (wrapped) model on the run's device, its optimisers as Fabric set them up
+        (none for a model that does not learn), and the Fabric that drives them.
+
+    Raises:
+        ValueError: for a factory that does not build a qdil ``RewardModel`` or a bonus
+            setting that does not apply, naming the recipe key.
+    """
+    device = train_env.device
+    model = reward(
+        train_env.single_observation_space.shape[0],
+        train_env.single_action_space.shape[0],
+        train_env.num_feet,
+    )
+    if not isinstance(model, RewardModel):
+        raise ValueError(f"reward: {type(model).__name__} is not a qdil RewardModel")
+    fabric = L.Fabric(**fabric_settings(device))
+    optimizers = model.configure_optimizers() if model.learned else None
+    if optimizers is None:
+        optimizers = []
+    elif not isinstance(optimizers, list | tuple):
+        optimizers = [optimizers]
+    if optimizers:
+        _, *optimizers = fabric.setup(model, *optimizers)
+    # the bonus's counts and models without optimisers (which Fabric does not set up) too
+    model = with_bonus(model, bonus, archives).to(device)
+    return model, optimizers, fabric
+
+
+def _demos(model: RewardModel, demos: DemoConfig, task: str) -> DemoSet | None:
+    """The recipe's demonstrations, or ``None`` for a reward model that needs none.
+
+    Raises:
+        ValueError: when ``model`` needs demonstrations and ``demos.path`` is unset.
+    """
+    if not model.needs_demos:
+        return None
+    if demos.path is None:
+        label = model.name or type(model).__name__
+        raise ValueError(f"demos.path: the {label} reward model needs demonstrations")
+    return load_demos(demos.path, task=task, num_episodes=demos.num_episodes)
+
+
 def build_run(
     *,
     name: str,
@@ -68,6 +239,10 @@ def build_run(
 ) -> Run:
     """Build every component of a run from the instantiated recipe sections.
 
+    The steps, in the order their random draws are made: the training environment, the
+    archives, the emitter and scheduler, the evaluation environment and VPPO, the reward
+    model and its demonstrations, the tracker.
+
     With ``resume``, the reward model's offline pretraining is skipped: the checkpoint
     that :func:`~qdil.qd.checkpoint.load_checkpoint` restores next holds its result.
     ``executor`` steps VPPO's simulations (default: here, :class:`LocalExecutor`).
@@ -82,109 +257,21 @@ def build_run(
     _, vppo_seed, emitter_seed, archive_seed, loop_seed, torch_seed, x0_seed = _seeds(seed, 7)
     torch.manual_seed(torch_seed)
 
-    # ---- environments and the policy space
-    train_env = LocomotionVectorEnv(
-        env.task,
-        env.num_envs,
-        max_episode_steps=env.max_episode_steps,
-        autoreset_mode="SameStep",
-        num_threads=env.num_threads,
-        backend=env.backend,
-        device=env.device,
-        **env.task_kwargs,
-    )
+    train_env = _environment(env, env.num_envs, "SameStep", env.device)
     device = train_env.device  # checked with env.backend before anything was built
     obs_dim = train_env.single_observation_space.shape[0]
     action_dim = train_env.single_action_space.shape[0]
-    k = train_env.num_feet
     solution_dim = VectorizedActor.solution_dim(obs_dim, action_dim, rl.actor_hidden)
 
-    # ---- archives, emitter, scheduler (pyribs)
-    fields = elite_fields(obs_dim)
-    cells = [qd.cells] * k
-    archive_seeds = np.random.SeedSequence(archive_seed).generate_state(3)
-    main = make_grid(
-        solution_dim=solution_dim,
-        cells=cells,
-        extra_fields=fields,
-        learning_rate=qd.archive_learning_rate,
-        threshold_min=qd.threshold_min,
-        seed=int(archive_seeds[0]),
-    )
-    archives = RunArchives(
-        main=main,
-        true=make_grid(
-            solution_dim=solution_dim, cells=cells, extra_fields=fields, seed=int(archive_seeds[1])
-        ),
-        deployable=make_grid(
-            solution_dim=solution_dim,
-            cells=cells,
-            extra_fields=deployable_fields(obs_dim),
-            seed=int(archive_seeds[2]),
-        ),
-    )
+    archives = _archives(qd, solution_dim, obs_dim, train_env.num_feet, archive_seed)
     x0 = VectorizedActor.initial_solution(obs_dim, action_dim, rl.actor_hidden, x0_seed)
-    theta_stats = RunningMeanStd(1, (obs_dim,))
-    theta_fields = {
-        "obs_mean": theta_stats.mean[0].numpy(),
-        "obs_var": theta_stats.var[0].numpy(),
-        "obs_count": theta_stats.count[0].numpy(),
-    }
-    if qd.emitter is None:
-        emitter = PPGAEmitter(main, x0, seed=emitter_seed)
-    else:
-        emitter = qd.emitter(main, x0, seed=emitter_seed)
-    if not hasattr(emitter, "theta_fields"):
-        raise ValueError(
-            "qd.emitter must be a PPGA-style emitter with theta, theta_fields and "
-            "coefficient_mean (e.g. qdil.qd.PPGAEmitter)"
-        )
-    emitter.theta_fields = theta_fields
-    scheduler = (
-        Scheduler(main, [emitter], add_mode="batch")
-        if qd.scheduler is None
-        else qd.scheduler(main, [emitter])
-    )
+    emitter, scheduler = _search(qd, archives.main, x0, obs_dim, emitter_seed)
 
-    # ---- evaluation environment and VPPO
-    branch_slots = emitter.batch_size * qd.branch_episodes
-    # a device scores θ_μ and the branches side by side (fewer steps in sequence); the
-    # C engine plays them one after the other, so its environment fits the larger one
-    on_device = env.backend in DEVICE_BACKENDS
-    together, larger = branch_slots + qd.mean_episodes, max(branch_slots, qd.mean_episodes)
-    eval_size = env.eval_envs or (together if on_device else larger)
-    eval_env = LocomotionVectorEnv(
-        env.task,
-        eval_size,
-        max_episode_steps=env.max_episode_steps,
-        autoreset_mode="Disabled",
-        num_threads=env.num_threads,
-        backend=env.backend,
-        device=device,
-        **env.task_kwargs,
-    )
+    eval_env = _environment(env, _eval_size(env, qd, emitter), "Disabled", device)
     rl.setup(train_env, eval_env, vppo_seed, executor)
 
-    # ---- reward model, driven by Lightning Fabric; the bonus wraps it afterwards
-    model = reward(obs_dim, action_dim, k)
-    if not isinstance(model, RewardModel):
-        raise ValueError(f"reward: {type(model).__name__} is not a qdil RewardModel")
-    fabric = L.Fabric(**fabric_settings(device))
-    optimizers = model.configure_optimizers() if model.learned else None
-    if optimizers is None:
-        optimizers = []
-    elif not isinstance(optimizers, list | tuple):
-        optimizers = [optimizers]
-    if optimizers:
-        _, *optimizers = fabric.setup(model, *optimizers)
-    # the bonus's counts and models without optimisers (which Fabric does not set up) too
-    model = with_bonus(model, bonus, archives).to(device)
-    demo_set = None
-    if model.needs_demos:
-        if demos.path is None:
-            label = model.name or type(model).__name__
-            raise ValueError(f"demos.path: the {label} reward model needs demonstrations")
-        demo_set = load_demos(demos.path, task=env.task, num_episodes=demos.num_episodes)
+    model, optimizers, fabric = _reward_model(reward, bonus, archives, train_env)
+    demo_set = _demos(model, demos, env.task)
     model.setup(demo_set)
     if not resume:  # a resumed run's checkpoint holds the pretrained weights
         model.pretrain(demo_set)

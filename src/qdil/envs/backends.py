@@ -3,20 +3,18 @@
 ``mujoco`` is MuJoCo's C engine stepped by numba kernels on the CPU
 (:class:`~qdil.envs.physics.MujocoBatch`, the default, bit-identical to gymnasium);
 ``warp`` is MuJoCo Warp on a GPU or on Warp's CPU device
-(:class:`~qdil.envs.warp_physics.WarpBatch`, float32, agrees within a tolerance). Both
-offer the same ``exported`` / ``sensordata`` arrays, ``view``, ``step`` (with an optional
-``reset=(ids, qpos, qvel)`` of simulations that reset instead of stepping) and ``reset``.
+(:class:`~qdil.envs.warp_physics.WarpBatch`, float32, agrees within a tolerance). Both are
+a :class:`~qdil.envs.physics_base.PhysicsBatch`.
 """
 
 from __future__ import annotations
-
-from typing import Any
 
 import mujoco
 import torch
 
 from qdil.devices import BACKENDS
-from qdil.envs.physics import Export, MujocoBatch
+from qdil.envs.physics import MujocoBatch
+from qdil.envs.physics_base import Export, PhysicsBatch
 
 
 def make_physics(
@@ -28,7 +26,7 @@ def make_physics(
     rne_post_constraint: bool,
     num_threads: int | None,
     device: torch.device,
-) -> Any:
+) -> PhysicsBatch:
     """The batch of ``num_sims`` simulations of ``model`` on ``backend`` and ``device``.
 
     The pair was checked by :func:`qdil.devices.run_device` (the environment's constructor).

@@ -35,14 +35,15 @@ from __future__ import annotations
 
 import os
 from collections.abc import Sequence
-from dataclasses import dataclass
 
 import mujoco
 import numba
 import numpy as np
 from numba import prange
+from typing_extensions import override
 
 from qdil.envs.mujoco_c import MUJOCO_C, cached_njit, call_pp, call_ppi, call_ppii
+from qdil.envs.physics_base import Export, PhysicsBatch, reset_ids
 
 # The kernels call MuJoCo through the addresses in ``c`` (qdil.envs.mujoco_c.MUJOCO_C), not
 # through ctypes globals, so that numba caches them on disk. numba rebuilds a cached kernel
@@ -140,66 +141,6 @@ def _step_kernel(
             call_ppi(c.mju_copy, sensors.ctypes.data + i * nsensor * 8, sensor_ptrs[i], nsensor)
 
 
-@dataclass(frozen=True)
-class Export:
-    """A slice of a flat ``MjData`` field copied out after every step and reset.
-
-    Attributes:
-        field: ``MjData`` attribute name, e.g. ``"qpos"`` or ``"cfrc_ext"``.
-        start: first element of the flattened field.
-        stop: one past the last element; ``None`` for the end of the field.
-    """
-
-    field: str
-    start: int = 0
-    stop: int | None = None
-
-
-def export_bounds(probe: mujoco.MjData, exports: dict[str, Export]) -> list[tuple[str, int, int]]:
-    """(field, start, stop) of each export in the flattened ``MjData`` field, validated.
-
-    Raises:
-        ValueError: if an export names an unknown field or a slice outside it.
-    """
-    bounds = []
-    for name, export in exports.items():
-        if not hasattr(probe, export.field):
-            raise ValueError(f"export {name!r}: MjData has no field {export.field!r}")
-        size = np.asarray(getattr(probe, export.field)).size
-        stop = size if export.stop is None else export.stop
-        if not 0 <= export.start < stop <= size:
-            raise ValueError(
-                f"export {name!r}: [{export.start}:{stop}] is outside {export.field} of size {size}"
-            )
-        bounds.append((export.field, export.start, stop))
-    return bounds
-
-
-def export_slices(bounds: list[tuple[str, int, int]], names: list[str]) -> dict[str, slice]:
-    """The columns of each named export in the concatenated (N, E) export array."""
-    slices, width = {}, 0
-    for name, (_, start, stop) in zip(names, bounds, strict=True):
-        slices[name] = slice(width, width + stop - start)
-        width += stop - start
-    return slices
-
-
-def reset_ids(
-    reset: tuple[np.ndarray, np.ndarray, np.ndarray] | None, active: np.ndarray | None
-) -> np.ndarray | None:
-    """The (n,) int64 ids of a step's ``reset=(ids, qpos, qvel)``, or ``None`` if it has none.
-
-    Raises:
-        ValueError: if a simulation to reset is also active in the step.
-    """
-    if reset is None or not len(reset[0]):
-        return None
-    ids = np.asarray(reset[0], dtype=np.int64)
-    if active is None or np.asarray(active)[ids].any():
-        raise ValueError("step(reset=...) resets simulations that are also active")
-    return ids
-
-
 # chunks of simulations per physics thread in a step (docs/benchmarks.md, "Environments")
 CHUNKS_PER_THREAD = 8
 
@@ -216,21 +157,17 @@ def default_num_threads() -> int:
     return max(1, min(cores, numba.config.NUMBA_NUM_THREADS))
 
 
-class MujocoBatch:
+class MujocoBatch(PhysicsBatch):
     """``num_sims`` simulations of one model, advanced together on ``num_threads`` threads.
 
     Args:
         model: the compiled model; shared read-only by all simulations.
         num_sims: number of simulations N.
-        exports: ``MjData`` slices to copy into :attr:`exported` after every step and reset,
-            keyed by a name of the caller's choosing.
+        exports: ``MjData`` slices to copy into ``exported`` after every step and reset,
+            keyed by a name of the caller's choosing (:class:`PhysicsBatch`).
         rne_post_constraint: run ``mj_rnePostConstraint`` after each step, as gymnasium does
             (needed for ``cfrc_ext``).
         num_threads: physics threads; ``None`` for every available core.
-
-    Attributes:
-        exported: (N, E) float64 array; :meth:`view` returns the slice of one export.
-        sensordata: (N, nsensordata) float64 array of sensor values at the current states.
 
     Raises:
         ValueError: if ``num_sims`` or ``num_threads`` is out of range or an export names an
@@ -246,16 +183,13 @@ class MujocoBatch:
         rne_post_constraint: bool = False,
         num_threads: int | None = None,
     ) -> None:
-        if num_sims < 1:
-            raise ValueError(f"num_envs must be at least 1, got {num_sims}")
+        super().__init__(model, num_sims, exports)
         max_threads = numba.config.NUMBA_NUM_THREADS
         if num_threads is not None and not 1 <= num_threads <= max_threads:
             raise ValueError(
                 f"num_threads must be between 1 and {max_threads} (NUMBA_NUM_THREADS), "
                 f"got {num_threads}"
             )
-        self.model = model
-        self.num_sims = num_sims
         self.num_threads = num_threads or default_num_threads()
         # prange hands out chunks of this many simulations as threads free up (numba splits
         # into one static block per thread otherwise), about CHUNKS_PER_THREAD per thread: a
@@ -279,17 +213,12 @@ class MujocoBatch:
         self._qvel_ptrs = self._pointers("qvel")
         self._sensor_ptrs = self._pointers("sensordata")
 
-        bounds = export_bounds(self.datas[0], exports)
-        self._slices = export_slices(bounds, list(exports))
-        sources = [self._pointers(field) + 8 * start for field, start, _ in bounds]
-        lengths = [stop - start for _, start, stop in bounds]
+        sources = [self._pointers(field) + 8 * start for field, start, _ in self._bounds]
+        lengths = [stop - start for _, start, stop in self._bounds]
         offsets = [columns.start for columns in self._slices.values()]
-        width = sum(lengths)
         self._sources = np.array(sources, dtype=np.int64).reshape(len(sources), num_sims)
         self._lengths = np.array(lengths, dtype=np.int32)
         self._offsets = np.array(offsets, dtype=np.int32)
-        self.exported = np.zeros((num_sims, width))
-        self.sensordata = np.zeros((num_sims, model.nsensordata))
         self._all = np.ones(num_sims, dtype=np.bool_)
         self._none = np.zeros(num_sims, dtype=np.bool_)
         self._idle_ctrl = np.zeros((num_sims, model.nu))
@@ -302,10 +231,7 @@ class MujocoBatch:
     def _pointers(self, field: str) -> np.ndarray:
         return np.array([getattr(d, field).ctypes.data for d in self.datas], dtype=np.int64)
 
-    def view(self, name: str) -> np.ndarray:
-        """The (N, length) columns of :attr:`exported` that hold export ``name``."""
-        return self.exported[:, self._slices[name]]
-
+    @override
     def step(
         self,
         ctrl: np.ndarray,
@@ -313,16 +239,7 @@ class MujocoBatch:
         active: np.ndarray | None = None,
         reset: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
     ) -> None:
-        """Set controls and advance the active simulations by ``nstep`` substeps.
-
-        Args:
-            ctrl: (N, nu) float64 C-contiguous controls.
-            nstep: number of ``mj_step`` calls (the task's frame skip).
-            active: (N,) bool mask of simulations to step; ``None`` for all.
-            reset: ``(ids, qpos, qvel)`` as :meth:`reset` takes them: simulations to reset
-                in the same call instead of stepping (they must not be active). Same result
-                as :meth:`reset` then :meth:`step`, in one parallel region.
-        """
+        # the resets and the steps run in one parallel region (one kernel call)
         rows, qpos, qvel = self._no_reset
         ids = reset_ids(reset, active)
         if ids is not None:
@@ -356,14 +273,8 @@ class MujocoBatch:
                 qvel,
             )
 
+    @override
     def reset(self, ids: np.ndarray, qpos: np.ndarray, qvel: np.ndarray) -> None:
-        """Reset simulations ``ids`` to the given states, as gymnasium's ``set_state``.
-
-        Args:
-            ids: (n,) int64 indices of the simulations to reset.
-            qpos: (n, nq) float64 positions.
-            qvel: (n, nv) float64 velocities.
-        """
         # the step kernel with no simulation stepping: one kernel serves both
         self.step(self._idle_ctrl, 0, self._none, reset=(ids, qpos, qvel))
 

@@ -7,16 +7,14 @@ terms, termination and reset noise (the tests require equality step by step).
 
 from __future__ import annotations
 
-import abc
-
 import numpy as np
 from typing_extensions import override
 
 from qdil.envs.arrays import namespace
-from qdil.envs.task_base import Arrays, LocomotionTask, check_range
+from qdil.envs.task_base import Arrays, HealthyTask, LocomotionTask, check_range
 
 
-class _PlanarWalker(LocomotionTask):
+class _PlanarWalker(HealthyTask):
     """Walker2d and Hopper: planar robots with a healthy reward and clipped velocities."""
 
     def __init__(
@@ -48,10 +46,6 @@ class _PlanarWalker(LocomotionTask):
         position = x["qpos"][:, 1:] if self.exclude_positions else x["qpos"]
         return xp.concatenate((position, xp.clip(x["qvel"], -10, 10)), axis=1)
 
-    @abc.abstractmethod
-    def is_healthy(self, x: Arrays) -> np.ndarray:
-        """(N,) bool health test."""
-
     @override
     def reward(
         self, velocity: np.ndarray, action: np.ndarray, x: Arrays
@@ -66,10 +60,6 @@ class _PlanarWalker(LocomotionTask):
             "reward_ctrl": -ctrl_cost,
             "reward_survive": healthy,
         }
-
-    @override
-    def terminated(self, x: Arrays) -> np.ndarray:
-        return ~self.is_healthy(x) & self.terminate_when_unhealthy
 
     @override
     def info(self, x: Arrays, velocity: np.ndarray) -> dict[str, np.ndarray]:
@@ -177,6 +167,7 @@ class HalfCheetah(LocomotionTask):
     feet = ("bfoot", "ffoot")
     default_xml = "half_cheetah.xml"
     default_frame_skip = 5
+    normal_velocity_noise = True
 
     def __init__(
         self,
@@ -206,10 +197,3 @@ class HalfCheetah(LocomotionTask):
         forward = self.forward_reward_weight * velocity
         ctrl_cost = self.ctrl_cost_weight * xp.sum(xp.square(action), axis=1)
         return forward - ctrl_cost, {"reward_forward": forward, "reward_ctrl": -ctrl_cost}
-
-    @override
-    def reset_noise(self, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-        low, high = -self.reset_noise_scale, self.reset_noise_scale
-        qpos = self.init_qpos + rng.uniform(low=low, high=high, size=self.model.nq)
-        qvel = self.init_qvel + self.reset_noise_scale * rng.standard_normal(self.model.nv)
-        return qpos, qvel

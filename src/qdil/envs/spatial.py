@@ -12,16 +12,30 @@ import numpy as np
 from typing_extensions import override
 
 from qdil.envs.arrays import constant, namespace
-from qdil.envs.physics import Export
-from qdil.envs.task_base import Arrays, LocomotionTask, check_range
+from qdil.envs.physics_base import Export
+from qdil.envs.task_base import Arrays, HealthyTask, check_range
 
 
-class Humanoid(LocomotionTask):
+class _SpatialWalker(HealthyTask):
+    """Humanoid and Ant: robots that turn, with contact forces in observation and reward."""
+
+    needs_rne = True
+
+    @override
+    def info(self, x: Arrays, velocity: np.ndarray) -> dict[str, np.ndarray]:
+        return {
+            "x_position": x["qpos"][:, 0].copy(),
+            "y_position": x["qpos"][:, 1].copy(),
+            "x_velocity": velocity[:, 0].copy(),
+            "y_velocity": velocity[:, 1].copy(),
+        }
+
+
+class Humanoid(_SpatialWalker):
     """Gymnasium's Humanoid-v5; feet ``right_foot``, ``left_foot``; reward has a contact cost."""
 
     gym_id = "Humanoid-v5"
     feet = ("right_foot", "left_foot")
-    needs_rne = True
     default_xml = "humanoid.xml"
     default_frame_skip = 5
 
@@ -120,28 +134,15 @@ class Humanoid(LocomotionTask):
             "reward_contact": -contact_cost,
         }
 
-    @override
-    def terminated(self, x: Arrays) -> np.ndarray:
-        return ~self.is_healthy(x) & self.terminate_when_unhealthy
 
-    @override
-    def info(self, x: Arrays, velocity: np.ndarray) -> dict[str, np.ndarray]:
-        return {
-            "x_position": x["qpos"][:, 0].copy(),
-            "y_position": x["qpos"][:, 1].copy(),
-            "x_velocity": velocity[:, 0].copy(),
-            "y_velocity": velocity[:, 1].copy(),
-        }
-
-
-class Ant(LocomotionTask):
+class Ant(_SpatialWalker):
     """Gymnasium's Ant-v5; four feet, the ankle geoms; reward has a contact cost."""
 
     gym_id = "Ant-v5"
     feet = ("left_ankle_geom", "right_ankle_geom", "third_ankle_geom", "fourth_ankle_geom")
-    needs_rne = True
     default_xml = "ant.xml"
     default_frame_skip = 5
+    normal_velocity_noise = True
 
     def __init__(
         self,
@@ -217,24 +218,4 @@ class Ant(LocomotionTask):
             "reward_ctrl": -ctrl_cost,
             "reward_contact": -contact_cost,
             "reward_survive": healthy,
-        }
-
-    @override
-    def terminated(self, x: Arrays) -> np.ndarray:
-        return ~self.is_healthy(x) & self.terminate_when_unhealthy
-
-    @override
-    def reset_noise(self, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-        low, high = -self.reset_noise_scale, self.reset_noise_scale
-        qpos = self.init_qpos + rng.uniform(low=low, high=high, size=self.model.nq)
-        qvel = self.init_qvel + self.reset_noise_scale * rng.standard_normal(self.model.nv)
-        return qpos, qvel
-
-    @override
-    def info(self, x: Arrays, velocity: np.ndarray) -> dict[str, np.ndarray]:
-        return {
-            "x_position": x["qpos"][:, 0].copy(),
-            "y_position": x["qpos"][:, 1].copy(),
-            "x_velocity": velocity[:, 0].copy(),
-            "y_velocity": velocity[:, 1].copy(),
         }

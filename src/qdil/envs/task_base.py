@@ -1,7 +1,8 @@
 """The base of every locomotion task: what one gymnasium v5 task computes, for N simulations.
 
 :class:`LocomotionTask` fixes the interface the vector environment drives (the ``MjData``
-slices to export, observation, reward, termination, reset noise); the tasks themselves are in
+slices to export, observation, reward, termination, reset noise), and :class:`HealthyTask`
+the termination of the robots that can fall; the tasks themselves are in
 :mod:`qdil.envs.planar` (Walker2d, Hopper, HalfCheetah) and :mod:`qdil.envs.spatial`
 (Humanoid, Ant), and :mod:`qdil.envs.tasks` names them.
 """
@@ -16,9 +17,10 @@ from typing import ClassVar
 import gymnasium
 import mujoco
 import numpy as np
+from typing_extensions import override
 
 from qdil.envs.arrays import namespace
-from qdil.envs.physics import Export
+from qdil.envs.physics_base import Export
 
 _ASSETS = Path(gymnasium.__file__).parent / "envs" / "mujoco" / "assets"
 
@@ -41,6 +43,8 @@ class LocomotionTask(abc.ABC):
             ``"pgs"``), or ``None`` to keep it.
         reference_id: for a variant that differs from gymnasium on purpose, the gymnasium
             task it derives from (same spaces); ``None`` for the tasks equal to gymnasium's.
+        normal_velocity_noise: whether gymnasium's ``reset_model`` draws the initial
+            velocities from a scaled standard normal (HalfCheetah, Ant) rather than uniformly.
     """
 
     gym_id: ClassVar[str]
@@ -49,6 +53,7 @@ class LocomotionTask(abc.ABC):
     needs_rne: ClassVar[bool] = False
     solver: ClassVar[str | None] = None  # None: the model file's constraint solver
     reference_id: ClassVar[str | None] = None  # a variant's gymnasium namesake
+    normal_velocity_noise: ClassVar[bool] = False
     default_xml: ClassVar[str]
     default_frame_skip: ClassVar[int]
 
@@ -110,10 +115,31 @@ class LocomotionTask(abc.ABC):
         """One initial state (qpos, qvel), drawn exactly as gymnasium's ``reset_model``."""
         low, high = -self.reset_noise_scale, self.reset_noise_scale
         qpos = self.init_qpos + rng.uniform(low=low, high=high, size=self.model.nq)
-        qvel = self.init_qvel + rng.uniform(low=low, high=high, size=self.model.nv)
+        if self.normal_velocity_noise:
+            qvel = self.init_qvel + self.reset_noise_scale * rng.standard_normal(self.model.nv)
+        else:
+            qvel = self.init_qvel + rng.uniform(low=low, high=high, size=self.model.nv)
         return qpos, qvel
 
     reset_noise_scale: float
+
+
+class HealthyTask(LocomotionTask):
+    """A task whose episode ends when the robot leaves its healthy states.
+
+    Gymnasium's Walker2d, Hopper, Humanoid and Ant: :meth:`terminated` is ``not healthy``
+    where the task's ``terminate_when_unhealthy`` option is set.
+    """
+
+    terminate_when_unhealthy: bool
+
+    @abc.abstractmethod
+    def is_healthy(self, x: Arrays) -> np.ndarray:
+        """(N,) bool health test."""
+
+    @override
+    def terminated(self, x: Arrays) -> np.ndarray:
+        return ~self.is_healthy(x) & self.terminate_when_unhealthy
 
 
 def check_range(name: str, value: tuple[float, float]) -> tuple[float, float]:

@@ -34,8 +34,9 @@ from typing import Any
 import mujoco
 import numpy as np
 import torch
+from typing_extensions import override
 
-from qdil.envs.physics import Export, export_bounds, export_slices, reset_ids
+from qdil.envs.physics_base import Export, PhysicsBatch, reset_ids
 
 
 def import_warp() -> tuple[Any, Any]:
@@ -60,14 +61,14 @@ def import_warp() -> tuple[Any, Any]:
     return warp, mujoco_warp
 
 
-class WarpBatch:
+class WarpBatch(PhysicsBatch):
     """``num_sims`` simulations of one model, advanced together on a MuJoCo Warp device.
 
     Args:
         model: the compiled model (its solver must not be PGS).
         num_sims: number of simulations (Warp worlds) N.
-        exports: ``MjData`` slices to copy into :attr:`exported` after every step and reset,
-            keyed by a name of the caller's choosing.
+        exports: ``MjData`` slices to copy into ``exported`` after every step and reset,
+            keyed by a name of the caller's choosing (:class:`PhysicsBatch`).
         rne_post_constraint: run ``rne_postconstraint`` after each step, as gymnasium does
             (needed for ``cfrc_ext``).
         device: the torch device of the Warp device, CPU or CUDA (checked by
@@ -79,11 +80,12 @@ class WarpBatch:
             (results are bit-identical; ``tests/envs/test_warp_backend.py``).
 
     Attributes:
-        exported: (N, E) float64 host array; :meth:`view` returns the slice of one export.
-        sensordata: (N, nsensordata) float64 host array of sensor values at the current states.
         torch_exported: (N, E) float32 tensor on the device, the same values.
         torch_sensordata: (N, nsensordata) float32 tensor on the device.
         torch_device: ``device``.
+
+    ``exported`` and ``sensordata`` are host copies of :attr:`torch_exported` and
+    :attr:`torch_sensordata`, made by :meth:`step` and :meth:`reset`.
 
     Raises:
         ValueError: if ``num_sims`` is below 1, an export names an unknown field, or the
@@ -101,8 +103,7 @@ class WarpBatch:
         num_threads: int | None = None,
         graphs: bool = True,
     ) -> None:
-        if num_sims < 1:
-            raise ValueError(f"num_envs must be at least 1, got {num_sims}")
+        super().__init__(model, num_sims, exports)
         if model.opt.solver == mujoco.mjtSolver.mjSOL_PGS:
             raise ValueError(
                 "MuJoCo Warp has no PGS solver and this model asks for it; use the task's "
@@ -116,8 +117,6 @@ class WarpBatch:
             )
         # the whole integration state (time, qpos, qvel, act, warm start, ctrl, ...)
         self._state = int(self.mjw.State.INTEGRATION)
-        self.model = model
-        self.num_sims = num_sims
         self.num_threads = 1
         self.rne_post_constraint = rne_post_constraint
         self.warp_device = str(device)  # Warp's name of it: "cpu", "cuda" or "cuda:N"
@@ -138,16 +137,11 @@ class WarpBatch:
         on_gpu = self.torch_device.type == "cuda"
         self._capture_stream = self.warp.Stream(self.warp_device) if on_gpu and graphs else None
 
-        self._fields = export_bounds(mujoco.MjData(model), exports)
-        self._slices = export_slices(self._fields, list(exports))
-        for field, _, _ in self._fields:
+        for field, _, _ in self._bounds:
             if not hasattr(self.wdata, field):
                 raise ValueError(f"export of {field!r}: MuJoCo Warp's Data has no such field")
-        width = sum(stop - start for _, start, stop in self._fields)
-        self.torch_exported = torch.zeros((num_sims, width), device=self.torch_device)
-        self.torch_sensordata = torch.zeros((num_sims, model.nsensordata), device=self.torch_device)
-        self.exported = np.zeros((num_sims, width))
-        self.sensordata = np.zeros((num_sims, model.nsensordata))
+        self.torch_exported = torch.zeros(self.exported.shape, device=self.torch_device)
+        self.torch_sensordata = torch.zeros(self.sensordata.shape, device=self.torch_device)
         self._ctrl = self._tensor("ctrl")
         self._qpos = self._tensor("qpos")
         self._qvel = self._tensor("qvel")
@@ -169,15 +163,7 @@ class WarpBatch:
         tensor = self.warp.to_torch(getattr(self.wdata, field))
         return tensor.reshape(self.num_sims, -1)
 
-    @property
-    def slices(self) -> dict[str, slice]:
-        """The columns of :attr:`exported` (and :attr:`torch_exported`) of each export."""
-        return dict(self._slices)
-
-    def view(self, name: str) -> np.ndarray:
-        """The (N, length) columns of :attr:`exported` that hold export ``name``."""
-        return self.exported[:, self._slices[name]]
-
+    @override
     def step(
         self,
         ctrl: np.ndarray,
@@ -185,16 +171,7 @@ class WarpBatch:
         active: np.ndarray | None = None,
         reset: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
     ) -> None:
-        """Set controls and advance the active simulations by ``nstep`` substeps.
-
-        Args:
-            ctrl: (N, nu) controls.
-            nstep: number of ``step`` calls (the task's frame skip).
-            active: (N,) bool mask of simulations to step; ``None`` for all.
-            reset: ``(ids, qpos, qvel)`` as :meth:`reset` takes them: simulations to reset
-                instead of stepping (they must not be active); reset first, then stepped
-                with the others held, as :class:`~qdil.envs.physics.MujocoBatch` does.
-        """
+        # every world is stepped: the inactive ones are restored after (step_torch)
         if reset_ids(reset, active) is not None:
             self.reset(*reset)
         keep = None if active is None or np.all(active) else ~np.asarray(active, dtype=bool)
@@ -232,7 +209,7 @@ class WarpBatch:
             if active is not None:
                 mjw.set_state(self.wmodel, self.wdata, self._saved, self._state, self._keep)
             # exports read the post-step data (cfrc_ext, ...) before collision overwrites it
-            exported = torch.cat([self._tensor(f)[:, a:b] for f, a, b in self._fields], dim=1)
+            exported = torch.cat([self._tensor(f)[:, a:b] for f, a, b in self._bounds], dim=1)
             if self.model.nsensordata:
                 self._launch(("sensors",), self._sensor_pass)
             self._store_where(active, exported, self._tensor("sensordata"))
@@ -317,14 +294,8 @@ class WarpBatch:
         self.exported[rows] = self.torch_exported[index].cpu().double().numpy()
         self.sensordata[rows] = self.torch_sensordata[index].cpu().double().numpy()
 
+    @override
     def reset(self, ids: np.ndarray, qpos: np.ndarray, qvel: np.ndarray) -> None:
-        """Reset simulations ``ids`` to the given states, as gymnasium's ``set_state``.
-
-        Args:
-            ids: (n,) indices of the simulations to reset.
-            qpos: (n, nq) positions.
-            qvel: (n, nv) velocities.
-        """
         ids = np.asarray(ids, dtype=np.int64)
         if ids.size == 0:
             return
@@ -365,5 +336,5 @@ class WarpBatch:
             # the reset worlds' observed quantities; the other worlds' are recomputed from
             # their own states, and the next step recomputes everything anyway
             self._launch(("observed",), self._observed_stages)
-            exported = torch.cat([self._tensor(f)[:, a:b] for f, a, b in self._fields], dim=1)
+            exported = torch.cat([self._tensor(f)[:, a:b] for f, a, b in self._bounds], dim=1)
             self._store_where(mask, exported, self._tensor("sensordata"))

@@ -7,6 +7,7 @@ runs with it, on the C engine's host face or on a device (:func:`qdil.envs.faces
 from __future__ import annotations
 
 import torch
+from typing_extensions import override
 
 from qdil.data import Rollout
 from qdil.envs.faces import torch_face
@@ -26,6 +27,7 @@ class LocalExecutor(Executor):
     the host on a device.
     """
 
+    @override
     def setup(
         self, train_env: LocomotionVectorEnv, eval_env: LocomotionVectorEnv, obs_clip: float
     ) -> None:
@@ -34,10 +36,11 @@ class LocalExecutor(Executor):
         self.eval_face = torch_face(eval_env)
         self.obs_clip = obs_clip
 
+    @override
     def start(self, seed: int) -> None:
-        """Reset every training simulation."""
         self.collector.start(seed)
 
+    @override
     def collect(
         self,
         actor: VectorizedActor,
@@ -46,13 +49,13 @@ class LocalExecutor(Executor):
         generator: torch.Generator,
         update_stats: bool,
     ) -> tuple[Rollout, PolicyData]:
-        """Roll out ``num_steps`` steps of P policies (``Collector.collect``)."""
         return self.collector.collect(actor, stats, num_steps, generator, update_stats)
 
+    @override
     def pop_episode_stats(self) -> tuple[list[float], list[int]]:
-        """Returns and lengths of the training episodes finished since the last call."""
         return self.collector.pop_episode_stats()
 
+    @override
     def evaluate(
         self,
         actor: VectorizedActor,
@@ -63,10 +66,10 @@ class LocalExecutor(Executor):
         deterministic: bool,
         generator: torch.Generator,
     ) -> Evaluation:
-        """Score P policies over ``episodes`` episodes each (``evaluate_policies``)."""
         group = EvaluationGroup(actor, stats, episodes, seed, generator)
         return evaluate_groups(self.eval_face, [group], reward_fn, deterministic, self.obs_clip)[0]
 
+    @override
     def evaluate_all(
         self,
         groups: list[EvaluationGroup],
@@ -93,5 +96,6 @@ class LocalExecutor(Executor):
             ]
         return evaluate_groups(face, groups, reward_fn, deterministic, self.obs_clip)
 
+    @override
     def close(self) -> None:
         """Nothing to release: the environments belong to the run."""

@@ -18,6 +18,8 @@ import os
 import socket
 from typing import Any
 
+from typing_extensions import override
+
 from qdil import numerics
 from qdil.executors.base import ExecutorError
 from qdil.executors.sharded import ShardedExecutor
@@ -106,6 +108,7 @@ class RayExecutor(ShardedExecutor):
                 "RUN_DIR` continues it from its last checkpoint, on the cluster or locally."
             ) from error
 
+    @override
     def close(self) -> None:
         """Stop the workers (the Ray cluster itself keeps running)."""
         ray = import_ray()

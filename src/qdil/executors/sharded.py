@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 import torch
+from typing_extensions import override
 
 from qdil.data import Rollout
 from qdil.devices import DEVICE_BACKENDS
@@ -70,6 +71,7 @@ class ShardedExecutor(Executor):
         """Call ``method(*args)`` on worker i for each ``(i, args)``; results in that order."""
 
     # --------------------------------------------------------------- the seam
+    @override
     def setup(
         self, train_env: LocomotionVectorEnv, eval_env: LocomotionVectorEnv, obs_clip: float
     ) -> None:
@@ -100,11 +102,13 @@ class ShardedExecutor(Executor):
             )
         self._launch(train_env.factory, self.bounds)
 
+    @override
     def start(self, seed: int) -> None:
         """Begin a phase; workers reset their shards with the call that follows."""
         self._phase = Phase(self._phase.number + 1, seed)
         self._history = []
 
+    @override
     def collect(
         self,
         actor: VectorizedActor,
@@ -113,7 +117,6 @@ class ShardedExecutor(Executor):
         generator: torch.Generator,
         update_stats: bool,
     ) -> tuple[Rollout, PolicyData]:
-        """Roll out ``num_steps`` steps of P policies, each worker on its shard."""
         n, num_policies = self.num_envs, actor.num_models
         if n % num_policies:
             raise ValueError(f"{n} environments cannot be split among {num_policies} policies")
@@ -141,10 +144,11 @@ class ShardedExecutor(Executor):
         self.episodes.add(steps)
         return finish_rollout(steps, num_policies, stats, self.obs_clip, update_stats)
 
+    @override
     def pop_episode_stats(self) -> tuple[list[float], list[int]]:
-        """Returns and lengths of the training episodes finished since the last call."""
         return self.episodes.pop()
 
+    @override
     def evaluate(
         self,
         actor: VectorizedActor,
@@ -155,7 +159,6 @@ class ShardedExecutor(Executor):
         deterministic: bool,
         generator: torch.Generator,
     ) -> Evaluation:
-        """Score P policies over ``episodes`` episodes each, the slots cut into shards."""
         used = actor.num_models * episodes
         if self.eval_capacity < used:
             raise ValueError(

@@ -11,21 +11,25 @@ the paper applies one to all online-trained reward models.
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
+from typing import Any
 
 import torch
 import torch.nn.functional as F
 from torch.optim import Optimizer
+from typing_extensions import override
 
 from qdil.data import TransitionBatch
 from qdil.rewards.base import RewardModel
+from qdil.rewards.nets import gradient_penalty
 
 
 class AdversarialReward(RewardModel):
     """Base of GAIL, AIRL, MaxEntIRL and the WAE family.
 
     Subclasses take their own options and pass ``**kwargs`` on, so that these options are
-    accepted by every adversarial model (and validated by the recipe parser).
+    accepted by every adversarial model (and validated by the recipe parser). The default
+    optimiser is one Adam over all parameters at ``learning_rate``.
 
     Args:
         obs_dim: observation size.
@@ -73,6 +77,28 @@ class AdversarialReward(RewardModel):
         if self.use_measures:
             parts.append(batch.contacts)
         return torch.cat(parts, dim=1)
+
+    @override
+    def configure_optimizers(self) -> Optimizer:
+        return torch.optim.Adam(self.parameters(), lr=self.learning_rate)
+
+    def penalty(
+        self,
+        critic: Callable[[torch.Tensor], torch.Tensor],
+        x_e: torch.Tensor,
+        x_p: torch.Tensor,
+    ) -> torch.Tensor:
+        """The unweighted gradient penalty of ``critic`` between expert and policy inputs.
+
+        WGAN-GP's (:func:`~qdil.rewards.nets.gradient_penalty`); zero, and not computed,
+        when ``gp_weight`` is 0.
+
+        Args:
+            critic: maps (B, d) inputs to (B,) scores.
+            x_e: (B, d) expert inputs.
+            x_p: (B, d) policy inputs.
+        """
+        return gradient_penalty(critic, x_e, x_p) if self.gp_weight else torch.zeros(())
 
     def descend(self, optimizer: Optimizer, loss: torch.Tensor, what: str, iteration: int) -> None:
         """One manual-optimisation step on ``loss`` (Lightning's ``manual_backward``).
@@ -127,6 +153,32 @@ class AdversarialReward(RewardModel):
             order = torch.randperm(len(expert))
             for start in range(0, len(expert) - size + 1, size):
                 yield expert[order[start : start + size]], policy.sample(size)
+
+
+class MeasureConditioned:
+    """Mixin of the "mC" models: the parent model with ``use_measures`` on by default.
+
+    Put it first among the bases, ``class MCWAEWGAIL(MeasureConditioned, WAEWGAIL)``: the
+    parent's options pass through, and x = (s, a, δ(s)) unless the recipe turns it off.
+
+    Args:
+        obs_dim: observation size.
+        action_dim: action size.
+        num_measures: k.
+        use_measures: measure conditioning, on by default: this is what "mC" names.
+        **kwargs: the parent model's options.
+    """
+
+    def __init__(
+        self,
+        obs_dim: int,
+        action_dim: int,
+        num_measures: int,
+        *,
+        use_measures: bool = True,
+        **kwargs: Any,
+    ) -> None:
+        super().__init__(obs_dim, action_dim, num_measures, use_measures=use_measures, **kwargs)
 
 
 def average(steps: list[dict[str, float]]) -> dict[str, float]:

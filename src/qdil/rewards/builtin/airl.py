@@ -15,7 +15,7 @@ from typing_extensions import override
 
 from qdil.data import TransitionBatch
 from qdil.rewards.adversarial import AdversarialReward, average
-from qdil.rewards.nets import gradient_penalty, mlp
+from qdil.rewards.nets import mlp
 from qdil.rewards.registry import register_reward
 
 
@@ -70,10 +70,6 @@ class AIRL(AdversarialReward):
         return g + self.gamma * (1 - done) * self.h(next_obs).squeeze(-1) - self.h(obs).squeeze(-1)
 
     @override
-    def configure_optimizers(self) -> torch.optim.Optimizer:
-        return torch.optim.Adam(self.parameters(), lr=self.learning_rate)
-
-    @override
     def reward(self, batch: TransitionBatch) -> torch.Tensor:
         f = self.f(self._inputs(batch))
         if self.reward_type == "logit":
@@ -93,6 +89,6 @@ class AIRL(AdversarialReward):
             in_e, in_p = self._inputs(expert_mb), self._inputs(policy_mb)
             logit_e = self.f(in_e) - expert_mb.log_probs
             logit_p = self.f(in_p) - policy_mb.log_probs
-            gp = gradient_penalty(self.f, in_e, in_p) if self.gp_weight else torch.zeros(())
+            gp = self.penalty(self.f, in_e, in_p)
             steps.append(self.classify(optimizer, logit_e, logit_p, gp, iteration))
         return average(steps)

@@ -16,7 +16,7 @@ from typing_extensions import override
 
 from qdil.data import TransitionBatch
 from qdil.rewards.adversarial import AdversarialReward, average
-from qdil.rewards.nets import gail_reward, gradient_penalty, mlp
+from qdil.rewards.nets import gail_reward, mlp
 from qdil.rewards.registry import register_reward
 
 
@@ -54,10 +54,6 @@ class GAIL(AdversarialReward):
         return self.discriminator(x).squeeze(-1)
 
     @override
-    def configure_optimizers(self) -> torch.optim.Optimizer:
-        return torch.optim.Adam(self.parameters(), lr=self.learning_rate)
-
-    @override
     def reward(self, batch: TransitionBatch) -> torch.Tensor:
         logits = self.logits(self.features(batch))
         if self.reward_type == "logit":
@@ -74,7 +70,7 @@ class GAIL(AdversarialReward):
         steps = []
         for expert_mb, policy_mb in self.minibatches(expert, policy):
             x_e, x_p = self.features(expert_mb), self.features(policy_mb)
-            gp = gradient_penalty(self.logits, x_e, x_p) if self.gp_weight else torch.zeros(())
+            gp = self.penalty(self.logits, x_e, x_p)
             steps.append(
                 self.classify(optimizer, self.logits(x_e), self.logits(x_p), gp, iteration)
             )

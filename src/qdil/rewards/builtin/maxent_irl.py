@@ -16,7 +16,7 @@ from typing_extensions import override
 
 from qdil.data import TransitionBatch
 from qdil.rewards.adversarial import AdversarialReward, average
-from qdil.rewards.nets import gradient_penalty, mlp
+from qdil.rewards.nets import mlp
 from qdil.rewards.registry import register_reward
 
 
@@ -78,7 +78,7 @@ class MaxEntIRL(AdversarialReward):
         for expert_mb, policy_mb in self.minibatches(expert, policy):
             x_e, x_p = self.features(expert_mb), self.features(policy_mb)
             r_e, r_p = self.raw(x_e), self.raw(x_p)
-            gp = gradient_penalty(self.raw, x_e, x_p) if self.gp_weight else torch.zeros(())
+            gp = self.penalty(self.raw, x_e, x_p)
             loss = r_p.mean() - r_e.mean() + self.gp_weight * gp
             self.descend(optimizer, loss, "reward loss", iteration)
             values = {

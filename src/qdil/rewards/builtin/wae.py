@@ -18,8 +18,8 @@ from typing_extensions import override
 
 from qdil.data import TransitionBatch
 from qdil.reductions import mean_over, std_over
-from qdil.rewards.adversarial import AdversarialReward, average
-from qdil.rewards.nets import gail_reward, gradient_penalty, mlp
+from qdil.rewards.adversarial import AdversarialReward, MeasureConditioned, average
+from qdil.rewards.nets import gail_reward, mlp
 from qdil.rewards.registry import register_reward
 
 CALIBRATION_LOGIT = 2.0
@@ -229,9 +229,7 @@ class WAEReward(AdversarialReward):
             z_e, z_p = self.sample(x_e), self.sample(x_p)
             # ---- latent adversary step on fixed codes
             codes_e, codes_p = z_e.detach(), z_p.detach()
-            gp = torch.zeros(())
-            if self.gp_weight:
-                gp = gradient_penalty(self.critic, codes_e, codes_p)
+            gp = self.penalty(self.critic, codes_e, codes_p)
             adversary_loss = self.adversary_loss(codes_e, codes_p) + self.gp_weight * gp
             self.descend(adversary_opt, adversary_loss, "latent adversary loss", iteration)
             # ---- auto-encoder step
@@ -315,7 +313,7 @@ class WAEWGAIL(WAEReward):
 
 
 @register_reward("mcwae_wgail")
-class MCWAEWGAIL(WAEWGAIL):
+class MCWAEWGAIL(MeasureConditioned, WAEWGAIL):
     """mCWAE-WGAIL: WAE-WGAIL on x = (s, a, δ(s)); with the bonus, WQDIL's reward.
 
     Args:
@@ -328,20 +326,9 @@ class MCWAEWGAIL(WAEWGAIL):
 
     description = "mCWAE-WGAIL (WQDIL): measure-conditioned WAE-WGAIL, the paper's method"
 
-    def __init__(
-        self,
-        obs_dim: int,
-        action_dim: int,
-        num_measures: int,
-        *,
-        use_measures: bool = True,
-        **kwargs: Any,
-    ) -> None:
-        super().__init__(obs_dim, action_dim, num_measures, use_measures=use_measures, **kwargs)
-
 
 @register_reward("mcwae_gail")
-class MCWAEGAIL(WAEGAIL):
+class MCWAEGAIL(MeasureConditioned, WAEGAIL):
     """mCWAE-GAIL: WAE-GAIL on x = (s, a, δ(s)) (the paper's ablation).
 
     Args:
@@ -353,17 +340,6 @@ class MCWAEGAIL(WAEGAIL):
     """
 
     description = "mCWAE-GAIL (WQDIL ablation): measure-conditioned WAE-GAIL"
-
-    def __init__(
-        self,
-        obs_dim: int,
-        action_dim: int,
-        num_measures: int,
-        *,
-        use_measures: bool = True,
-        **kwargs: Any,
-    ) -> None:
-        super().__init__(obs_dim, action_dim, num_measures, use_measures=use_measures, **kwargs)
 
 
 def _default_policy_std(state_dict: dict[str, Any], prefix: str, *_: Any) -> None:
