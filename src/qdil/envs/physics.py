@@ -39,6 +39,7 @@ from collections.abc import Sequence
 import mujoco
 import numba
 import numpy as np
+import torch
 from numba import prange
 from typing_extensions import override
 
@@ -248,6 +249,13 @@ class MujocoBatch(PhysicsBatch):
             rows[ids] = np.arange(ids.size)
             qpos = np.ascontiguousarray(qpos, dtype=np.float64)
             qvel = np.ascontiguousarray(qvel, dtype=np.float64)
+        # numba's OpenMP pool, launched at its first use (here), sets the calling thread's
+        # OpenMP thread count, which torch shares, to NUMBA_NUM_THREADS (every core):
+        # torch, asked for one thread, then ran on all of them, and each small elementwise
+        # op (tanh, exp, sqrt) paid a parallel region and a spinning worker, about 3 ms of
+        # CPU per op on a loaded 2-core machine. Keep torch's count: torch computes on the
+        # threads it was given, as in the tests (tests/conftest.py sets one after the pool).
+        torch_threads = torch.get_num_threads()
         numba.set_num_threads(self.num_threads)
         with numba.parallel_chunksize(self.chunk_size):
             _step_kernel(
@@ -272,6 +280,8 @@ class MujocoBatch(PhysicsBatch):
                 qpos,
                 qvel,
             )
+        if torch.get_num_threads() != torch_threads:
+            torch.set_num_threads(torch_threads)
 
     @override
     def reset(self, ids: np.ndarray, qpos: np.ndarray, qvel: np.ndarray) -> None:
