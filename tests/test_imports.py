@@ -137,3 +137,18 @@ def test_every_module_imports_alone() -> None:
     )
     assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-4000:]
     assert done.stdout.strip() == "FAILED:"
+
+
+# the floors of docs/concepts: physics and RL below the QD loop and everything above it
+LOWER = ("qdil.envs", "qdil.rl", "qdil.executors", "qdil.demos")
+UPPER = ("qdil.qd", "qdil.evaluation", "qdil.tracking", "qdil.run", "qdil.cli")
+
+
+def test_the_lower_floors_import_nothing_from_the_upper_ones() -> None:
+    known = modules()
+    reaching_up = {
+        name: sorted(t for t in imported(name, path, known) if t.startswith(UPPER))
+        for name, path in known.items()
+        if name.startswith(LOWER)
+    }
+    assert {name: up for name, up in reaching_up.items() if up} == {}

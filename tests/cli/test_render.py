@@ -62,7 +62,7 @@ def run_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
 @pytest.fixture(scope="module")
 def gl() -> str:
     """The OpenGL backend, or a skip that says why none renders here."""
-    from qdil.evaluation.gl import GLUnavailableError, use_gl_backend
+    from qdil.envs.gl import GLUnavailableError, use_gl_backend
 
     try:
         return use_gl_backend()
@@ -203,7 +203,7 @@ def test_a_run_without_a_checkpoint_says_how_to_get_one(
 
 
 def test_no_opengl_is_one_line_naming_the_debian_packages(monkeypatch) -> None:
-    from qdil.evaluation import gl
+    from qdil.envs import gl
 
     monkeypatch.delenv("MUJOCO_GL", raising=False)
     monkeypatch.delenv("PYOPENGL_PLATFORM", raising=False)

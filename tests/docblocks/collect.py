@@ -60,7 +60,7 @@ def clone_files(destination: Path) -> None:
 
 def opengl() -> bool:
     """Whether headless OpenGL renders here (``qdil render`` needs it)."""
-    from qdil.evaluation.gl import GLUnavailableError, use_gl_backend
+    from qdil.envs.gl import GLUnavailableError, use_gl_backend
 
     try:
         use_gl_backend()

@@ -18,7 +18,7 @@ STEPS = 20
 @pytest.fixture(scope="module")
 def gl() -> str:
     """The OpenGL backend, or a skip that says why none renders here."""
-    from qdil.evaluation.gl import GLUnavailableError, use_gl_backend
+    from qdil.envs.gl import GLUnavailableError, use_gl_backend
 
     try:
         return use_gl_backend()

@@ -58,7 +58,7 @@ def run_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
 @pytest.fixture(scope="module")
 def gl() -> str:
     """The OpenGL backend, or a skip that says why none renders here."""
-    from qdil.evaluation.gl import GLUnavailableError, use_gl_backend
+    from qdil.envs.gl import GLUnavailableError, use_gl_backend
 
     try:
         return use_gl_backend()
@@ -167,7 +167,7 @@ def test_chromium_plays_a_clicked_cells_video_without_errors(page) -> None:
 def test_without_opengl_the_page_says_why_and_stderr_has_one_line(
     run_dir: Path, tmp_path: Path, monkeypatch, capsys
 ) -> None:
-    from qdil.evaluation import gl
+    from qdil.envs import gl
 
     def no_gl() -> str:
         raise gl.GLUnavailableError("no headless OpenGL to render with (a test)")

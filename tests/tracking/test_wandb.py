@@ -106,7 +106,7 @@ def test_offline_wandb_run_holds_the_metrics_and_a_resume_continues_it(tmp_path:
     table = json.loads(tables[0].read_text())
     assert "objective" in table["columns"] and len(table["data"]) >= 1
     # the elites' gaits: 4 videos of the deployable archive at the last step, where GL renders
-    from qdil.evaluation.gl import GLUnavailableError, use_gl_backend
+    from qdil.envs.gl import GLUnavailableError, use_gl_backend
 
     try:
         use_gl_backend()

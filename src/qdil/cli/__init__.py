@@ -49,7 +49,7 @@ def _is_user_error(error: BaseException) -> bool:
     executors = sys.modules.get("qdil.executors.base")  # e.g. an unreachable Ray cluster
     if executors is not None and isinstance(error, executors.ExecutorError):
         return True
-    gl = sys.modules.get("qdil.evaluation.gl")  # no OpenGL: the message names the packages
+    gl = sys.modules.get("qdil.envs.gl")  # no OpenGL: the message names the packages
     if gl is not None and isinstance(error, gl.GLUnavailableError):
         return True
     # an incomplete plugin, or a reward model whose values turned NaN: the message names

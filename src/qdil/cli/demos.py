@@ -61,8 +61,12 @@ def demos(argv: list[str]) -> None:
             parser.error("give a run directory (or --info FILE / --import-npz FILE)")
         run_dir = existing_run_dir(parser, args.run_dir)
         from qdil.demos.generate import demos_from_run
+        from qdil.qd.checkpoint import load_archive
 
-        made, qpos, qvel = demos_from_run(run_dir, top=args.top, num=args.num, seed=args.seed)
+        archive, iteration = load_archive(run_dir, "true")
+        made, qpos, qvel = demos_from_run(
+            run_dir, archive, iteration, top=args.top, num=args.num, seed=args.seed
+        )
         save_demos(made, args.out, qpos, qvel)
     print(demo_table(made))
     print(f"wrote {args.out}")

@@ -356,7 +356,7 @@ def _render_for_wandb(run_dir: Path, count: int) -> list:
 
     They stay in ``RUN_DIR/videos/wandb``; without GL (or elites) one line says why, and none.
     """
-    from qdil.evaluation.gl import GLUnavailableError
+    from qdil.envs.gl import GLUnavailableError
     from qdil.evaluation.video import render_elites
 
     try:

@@ -110,7 +110,7 @@ def render(argv: list[str]) -> None:
     parser = render_parser()
     args = parser.parse_args(argv)
     run_dir = existing_run_dir(parser, args.run_dir)
-    from qdil.evaluation.gl import use_gl_backend
+    from qdil.envs.gl import use_gl_backend
     from qdil.evaluation.video import render_elites
 
     options: dict[str, Any] = {

@@ -20,7 +20,6 @@ from qdil.demos.dataset import DemoSet
 from qdil.envs.vector import LocomotionVectorEnv
 from qdil.files import CONFIG_NAME
 from qdil.provenance import git_state
-from qdil.qd.checkpoint import load_archive
 from qdil.rl.collect import ActionMap
 from qdil.rl.networks import VectorizedActor
 from qdil.rl.normalize import RunningMeanStd
@@ -158,16 +157,30 @@ def record_episodes(
 
 
 def demos_from_run(
-    run_dir: str | Path, top: int = 500, num: int = 4, seed: int = 0
+    run_dir: str | Path,
+    archive: Any,
+    iteration: int,
+    top: int = 500,
+    num: int = 4,
+    seed: int = 0,
 ) -> tuple[DemoSet, np.ndarray, np.ndarray]:
     """The paper's pipeline on a run directory: select elites, record their episodes.
+
+    Args:
+        run_dir: the run (its ``config.yaml`` says the task and the policies' shape).
+        archive: the run's true-keyed pyribs archive, as
+            :func:`qdil.qd.checkpoint.load_archive` reads it (the caller loads it: the
+            demonstrations sit below the QD loop).
+        iteration: the iteration the archive was saved at (recorded in the metadata).
+        top: elites to choose among, best first.
+        num: demonstrations to record.
+        seed: reset seed of the episodes.
 
     Raises:
         ValueError: if the archive holds no elites.
     """
     run_dir = Path(run_dir)
     config = yaml.safe_load((run_dir / CONFIG_NAME).read_text())
-    archive, iteration = load_archive(run_dir, "true")
     elites = archive.data()
     if len(elites["objective"]) == 0:
         raise ValueError(f"{run_dir}: the archive holds no elites yet")

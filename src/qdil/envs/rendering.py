@@ -4,7 +4,7 @@ The state (``qpos``, ``qvel``) is copied into an ``MjData`` of a copy of the mod
 from there, so rendering reads the batch and never writes to it: physics is bit-for-bit the
 same with rendering on or off (tested). The camera follows the torso from the side, as
 ``qdil render`` films. MuJoCo's renderer needs OpenGL: ``MUJOCO_GL`` as set, else EGL and
-then OSMesa, the first that draws (:func:`qdil.evaluation.gl.use_gl_backend`).
+then OSMesa, the first that draws (:func:`qdil.envs.gl.use_gl_backend`).
 """
 
 from __future__ import annotations
@@ -37,7 +37,7 @@ class StateRenderer:
     def __init__(
         self, model: mujoco.MjModel, width: int = WIDTH, height: int = HEIGHT, distance: float = 4.0
     ) -> None:
-        from qdil.evaluation.gl import use_gl_backend  # standard library only; picks EGL/OSMesa
+        from qdil.envs.gl import use_gl_backend  # standard library only; picks EGL/OSMesa
 
         use_gl_backend()
         self.model = copy.copy(model)

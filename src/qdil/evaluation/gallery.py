@@ -97,7 +97,7 @@ def make_gallery(
     Returns:
         The videos, or why there are none.
     """
-    from qdil.evaluation.gl import GLUnavailableError, use_gl_backend
+    from qdil.envs.gl import GLUnavailableError, use_gl_backend
 
     gallery = Gallery(settings)
     if settings.count <= 0:

@@ -24,9 +24,9 @@ from PIL import Image, ImageDraw, ImageFont
 
 from qdil.demos.generate import farthest_point_sampling
 from qdil.envs.faces import HostFace
+from qdil.envs.gl import use_gl_backend
 from qdil.envs.rendering import CAMERA_DISTANCE
 from qdil.envs.vector import LocomotionVectorEnv
-from qdil.evaluation.gl import use_gl_backend
 from qdil.evaluation.rescore import ReplaySettings, elite_policies
 from qdil.evaluation.video_files import FORMATS, VideoWriter, video_paths
 from qdil.qd.checkpoint import load_archive
