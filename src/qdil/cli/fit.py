@@ -5,7 +5,7 @@ from __future__ import annotations
 import shutil
 import sys
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 from qdil.cli.args import plain_text
 from qdil.cli.names import run_stem
@@ -17,6 +17,7 @@ if TYPE_CHECKING:
     from jsonargparse import ArgumentParser, Namespace
 
     from qdil.run import Run
+    from qdil.tracking import Tracker
 
 FIT_USAGE = (
     "qdil fit RECIPE.yaml [--section.key VALUE ...]\n"
@@ -280,8 +281,9 @@ def fit(argv: list[str]) -> None:
         load_checkpoint(run, state)
         del state  # the checkpoint's bytes are restored into the run; free them
         print(f"resuming {run_dir} at iteration {run.state.iteration}", file=sys.stderr)
-    if run.tracker.csv.path.exists():  # rows logged after the checkpoint (all, if none)
-        run.tracker.csv.truncate(run.state.iteration)
+    tracker = cast("Tracker", run.tracker)  # build_run's; the loop sees only its RunTracker face
+    if tracker.csv.path.exists():  # rows logged after the checkpoint (all, if none)
+        tracker.csv.truncate(run.state.iteration)
     record_start(run_dir, run.state.iteration)
     try:
         run_qd(run)
@@ -297,11 +299,9 @@ def fit(argv: list[str]) -> None:
         ) from None
     finally:
         run.vppo.executor.close()
-    if run.tracker.wants_videos:
-        run.tracker.log_videos(
-            _render_for_wandb(run_dir, run.tracker.logging.videos), run.state.iteration
-        )
-    run.tracker.finish(run)
+    if tracker.wants_videos:
+        tracker.log_videos(_render_for_wandb(run_dir, tracker.logging.videos), run.state.iteration)
+    tracker.finish(run)
     print(f"run directory: {run_dir}", file=sys.stderr)
 
 

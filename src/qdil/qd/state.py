@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
@@ -27,7 +27,30 @@ if TYPE_CHECKING:
     from qdil.qd.archives import RunArchives
     from qdil.rewards.base import RewardModel
     from qdil.rl.vppo import VPPO
-    from qdil.tracking import Tracker
+
+
+class IterationProgress(Protocol):
+    """A progress display the loop updates after every iteration."""
+
+    def update(self, metrics: dict[str, float]) -> None:
+        """Show the iteration's metrics."""
+        ...
+
+    def close(self) -> None:
+        """End the display."""
+        ...
+
+
+class RunTracker(Protocol):
+    """What the QD loop asks of its tracker (:class:`qdil.tracking.Tracker`, a floor above)."""
+
+    def progress(self, start: int, total: int) -> IterationProgress:
+        """A progress display from iteration ``start`` to ``total``."""
+        ...
+
+    def log(self, metrics: dict[str, float], iteration: int, run: Any) -> None:
+        """Record one iteration's metrics of ``run``."""
+        ...
 
 
 @dataclass
@@ -66,6 +89,6 @@ class Run:
     demos: DemoSet | None
     expert: TransitionBatch | None
     state: LoopState
-    tracker: Tracker
+    tracker: RunTracker
     config: dict[str, Any] = field(default_factory=dict)
     """The resolved recipe; checkpoints store it so a resume can tell an edited config.yaml."""
