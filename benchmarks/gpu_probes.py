@@ -25,6 +25,19 @@ def _sync(device: str) -> Callable[[], None]:
     return torch.cuda.synchronize if device.startswith("cuda") else lambda: None
 
 
+def _walker_face(device: str, n: int) -> tuple[Any, Any]:
+    """Walker2d-v5 on MuJoCo Warp with N simulations, autoreset on, and its torch face, reset."""
+    from qdil.envs.torch_vector import TorchVectorEnv
+    from qdil.envs.vector import LocomotionVectorEnv
+
+    env = LocomotionVectorEnv(
+        "Walker2d-v5", n, autoreset_mode="SameStep", backend="warp", device=device
+    )
+    face = TorchVectorEnv(env)
+    face.reset(seed=0)
+    return env, face
+
+
 def machine(device: str) -> dict[str, Any]:
     """The card, the host and the versions every figure depends on."""
     import mujoco
@@ -54,16 +67,9 @@ def rollout_throughput(device: str, sizes: list[int], steps: int) -> dict[str, f
     """env-steps/s of the rollouts' face, random actions, autoreset on, after a warm-up."""
     import torch
 
-    from qdil.envs.torch_vector import TorchVectorEnv
-    from qdil.envs.vector import LocomotionVectorEnv
-
     sync, result = _sync(device), {}
     for n in sizes:
-        env = LocomotionVectorEnv(
-            "Walker2d-v5", n, autoreset_mode="SameStep", backend="warp", device=device
-        )
-        face = TorchVectorEnv(env)
-        face.reset(seed=0)
+        env, face = _walker_face(device, n)
         generator = torch.Generator(device=face.device).manual_seed(0)
         dim = env.single_action_space.shape[0]
         actions = [
@@ -135,17 +141,12 @@ def step_breakdown(device: str, n: int, repeats: int) -> dict[str, Any]:
     import torch
 
     from qdil.envs.torch_vector import TorchVectorEnv
-    from qdil.envs.vector import LocomotionVectorEnv
     from qdil.rl.collect import Collector
     from qdil.rl.networks import VectorizedActor
     from qdil.rl.normalize import RunningMeanStd
 
     sync = _sync(device)
-    env = LocomotionVectorEnv(
-        "Walker2d-v5", n, autoreset_mode="SameStep", backend="warp", device=device
-    )
-    face = TorchVectorEnv(env)
-    face.reset(seed=0)
+    env, face = _walker_face(device, n)
     physics, task = env.physics, env.task
     generator = torch.Generator(device=face.device).manual_seed(0)
     dim = env.single_action_space.shape[0]
@@ -212,16 +213,9 @@ def frame_skip_floor(device: str, sizes: list[int], repeats: int) -> dict[str, f
     """
     import torch
 
-    from qdil.envs.torch_vector import TorchVectorEnv
-    from qdil.envs.vector import LocomotionVectorEnv
-
     sync, result = _sync(device), {}
     for n in sizes:
-        env = LocomotionVectorEnv(
-            "Walker2d-v5", n, autoreset_mode="SameStep", backend="warp", device=device
-        )
-        face = TorchVectorEnv(env)
-        face.reset(seed=0)
+        env, face = _walker_face(device, n)
         zeros = torch.zeros((n, env.single_action_space.shape[0]), device=face.device)
         for _ in range(face.reset_depth + 2):
             face.step(zeros)
