@@ -47,15 +47,25 @@ class Planned:
     recipe: str
     seed: int
     iterations: int
+    numba_threads: int | None = None
+    """``NUMBA_NUM_THREADS`` of the run's processes (``None``: numba's default, every core).
+    At commit e168ef1 it also sets torch's thread count (the protocol's page says why)."""
 
     @property
     def name(self) -> str:
         return f"{Path(self.recipe).stem}-seed{self.seed}"
 
 
-def _runs(task: str, stem: str, methods: tuple[str, ...], seeds: range, its: int) -> list:
+def _runs(
+    task: str,
+    stem: str,
+    methods: tuple[str, ...],
+    seeds: range,
+    its: int,
+    numba_threads: int | None = None,
+) -> list:
     return [
-        Planned(task, f"recipes/{stem}_{method}.yaml", seed, its)
+        Planned(task, f"recipes/{stem}_{method}.yaml", seed, its, numba_threads)
         for seed in seeds
         for method in methods
     ]
@@ -63,7 +73,7 @@ def _runs(task: str, stem: str, methods: tuple[str, ...], seeds: range, its: int
 
 # the order is the protocol's: HalfCheetah, then Walker2d; Humanoid follows its expert
 QUEUE = _runs("HalfCheetah-v5", "halfcheetah", ("mcwae", "gail", "ppga"), range(3), 50) + _runs(
-    "Walker2d-v5", "walker", ("mcwae", "gail", "ppga"), range(3, 5), 120
+    "Walker2d-v5", "walker", ("mcwae", "gail", "ppga"), range(3, 5), 120, numba_threads=1
 )
 
 
@@ -136,12 +146,16 @@ def work(run: Planned) -> None:
     command += ["--logging.wandb", "disabled", "--logging.progress", "false"]
     # also at the budget: the resume writes the budget into config.yaml (a run begun with
     # another target stops at its checkpoint there; nothing else depends on the target)
-    print("qdil", " ".join(command), f"# {logged} iterations logged", flush=True)
-    subprocess.run([sys.executable, "-m", "qdil.cli", *command], check=True)
+    env, prefix = dict(os.environ), ""
+    if run.numba_threads is not None:
+        env["NUMBA_NUM_THREADS"] = prefix = str(run.numba_threads)
+        prefix = f"NUMBA_NUM_THREADS={prefix} "
+    print(f"{prefix}qdil", " ".join(command), f"# {logged} iterations logged", flush=True)
+    subprocess.run([sys.executable, "-m", "qdil.cli", *command], check=True, env=env)
     episodes = str(EPISODES[run.task])
     evaluate = ["eval", str(folder), "--episodes", episodes, "--num-threads", "1"]
-    print("qdil", " ".join(evaluate), flush=True)
-    subprocess.run([sys.executable, "-m", "qdil.cli", *evaluate], check=True)
+    print(f"{prefix}qdil", " ".join(evaluate), flush=True)
+    subprocess.run([sys.executable, "-m", "qdil.cli", *evaluate], check=True, env=env)
 
 
 def main() -> None:
