@@ -97,7 +97,7 @@ def main() -> None:
     parser.add_argument("--c-max", type=int, default=4096, help="largest N for the C backend")
     args = parser.parse_args()
 
-    from qdil.envs.warp_physics import import_warp
+    from qdil.envs.warp_startup import import_warp
 
     warp, _ = import_warp()
     cuda = warp.is_cuda_available()

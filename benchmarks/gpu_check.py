@@ -20,7 +20,8 @@ measures, in steady state (kernels compiled and Warp graphs recorded before any 
    phase's seconds from ``metrics.csv`` (the second iteration is the figure: the first
    records graphs and builds the reward model's optimiser state), then the same with θ_μ
    and its branches scored one after the other (``--env.eval_envs 3000``) as the baseline
-   of scoring them side by side;
+   of scoring them side by side, and the same without narrowing an evaluation's batch to
+   its running episodes (``WarpBatch.narrow``) as the baseline of narrowing;
 4. the same two QD iterations as ``--runs`` separate ``qdil fit`` processes at once (seeds
    0, 1, ...) sharing the card, each run's seconds per iteration against the one run of
    step 3: what several seeds side by side cost;
@@ -37,6 +38,7 @@ are not a GPU's.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import csv
 import json
 import os
@@ -51,6 +53,7 @@ import xml.etree.ElementTree as ElementTree
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
+from unittest import mock
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # gpu_probes, beside this file
 from gpu_probes import (
@@ -75,12 +78,21 @@ QUICK = [
 ]  # fmt: skip
 
 
-def qd_iterations(device: str, overrides: list[str], iterations: int) -> list[dict[str, float]]:
-    """Each iteration's seconds, per phase, of ``qdil fit`` on the GPU recipe."""
+def qd_iterations(
+    device: str, overrides: list[str], iterations: int, narrow: bool = True
+) -> list[dict[str, float]]:
+    """Each iteration's seconds, per phase, of ``qdil fit`` on the GPU recipe.
+
+    ``narrow=False`` keeps every simulation of an evaluation in the batch to its end (the
+    ended episodes' worlds stepped and restored): the baseline of narrowing.
+    """
     from qdil.cli import main
+    from qdil.envs.torch_vector import TorchVectorEnv
 
     here = Path.cwd()
-    with tempfile.TemporaryDirectory() as folder:
+    with tempfile.TemporaryDirectory() as folder, contextlib.ExitStack() as stack:
+        if not narrow:
+            stack.enter_context(mock.patch.object(TorchVectorEnv, "narrow", return_value=None))
         os.chdir(folder)
         try:
             argv = ["fit", str(RECIPE), "--env.device", device, *overrides]
@@ -227,7 +239,11 @@ def markdown(result: dict[str, Any]) -> str:
             f"Solver iterations per world: mean {it['mean']:.1f}, max {it['max']:.0f}.",
             "",
         ]
-    for key, title in (("iterations", "side by side"), ("iterations_in_turns", "in turns")):
+    for key, title in (
+        ("iterations", "side by side, narrowed to the running episodes"),
+        ("iterations_in_turns", "in turns"),
+        ("iterations_wide", "side by side, every simulation to the end (not narrowed)"),
+    ):
         if key not in result:
             continue
         head = ["iteration", "seconds", *PHASES, "env-steps/s"]
@@ -311,6 +327,8 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         "iterations_in_turns": lambda: qd_iterations(
             args.device, [*overrides, "--env.eval_envs", str(turns)], 2
         ),
+        # the same iterations with the ended evaluation episodes kept in the batch
+        "iterations_wide": lambda: qd_iterations(args.device, overrides, 2, narrow=False),
         "side_by_side": lambda: runs_side_by_side(
             args.device, overrides, args.runs, 2, args.budget - 45 - (time.perf_counter() - start)
         ),

@@ -43,7 +43,7 @@ def machine(device: str) -> dict[str, Any]:
     import mujoco
     import torch
 
-    from qdil.envs.warp_physics import import_warp
+    from qdil.envs.warp_startup import import_warp
 
     warp, mjw = import_warp()
     card = torch.cuda.get_device_name(device) if device.startswith("cuda") else "Warp CPU device"
@@ -155,8 +155,8 @@ def step_breakdown(device: str, n: int, repeats: int) -> dict[str, Any]:
         face.step(actions)
     mjw, m, d = physics.mjw, physics.wmodel, physics.wdata
     sequences: dict[str, tuple[tuple, Callable[[], None]]] = {
-        "substeps": (("step", task.frame_skip), lambda: physics._substeps(task.frame_skip)),
-        "sensors": (("sensors",), physics._sensor_pass),
+        "substeps": (("step", task.frame_skip, n), lambda: physics._substeps(task.frame_skip, d)),
+        "sensors": (("sensors", n), lambda: physics._sensor_pass(d)),
         "reset": (("reset",), lambda: mjw.reset_data(m, d, reset=physics._reset_mask)),
         "observed": (("observed",), physics._observed_stages),
         "forward": (("forward",), lambda: mjw.forward(m, d)),
@@ -220,13 +220,13 @@ def frame_skip_floor(device: str, sizes: list[int], repeats: int) -> dict[str, f
         for _ in range(face.reset_depth + 2):
             face.step(zeros)
         physics = env.physics
-        graph = physics._graphs.get(("step", env.task.frame_skip))
+        graph = physics._graphs.get(("step", env.task.frame_skip, physics.num_sims))
         with physics._on_torch_stream():
             sync()
             start = time.perf_counter()
             for _ in range(repeats):
                 if graph is None:
-                    physics._substeps(env.task.frame_skip)
+                    physics._substeps(env.task.frame_skip, physics.wdata)
                 else:
                     physics.warp.capture_launch(graph)
             sync()

@@ -39,7 +39,7 @@ def test_a_machine_without_cuda_driver_gets_no_cuda_warning() -> None:
     pytest.importorskip("mujoco_warp", reason="the warp extra is not installed")
     if warp_startup.cuda_driver_found():
         pytest.skip("this machine has a CUDA driver: Warp has nothing to warn about")
-    code = "from qdil.envs.warp_physics import import_warp as w; print(w()[0].is_cuda_available())"
+    code = "from qdil.envs.warp_startup import import_warp as w; print(w()[0].is_cuda_available())"
     done = subprocess.run(
         [sys.executable, "-c", code], capture_output=True, text=True, timeout=600, check=True
     )

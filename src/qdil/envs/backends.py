@@ -40,8 +40,8 @@ def make_physics(
             num_threads=num_threads,
         )
     if backend == "warp":
-        from qdil.envs.warp_physics import WarpBatch, import_warp  # optional dependency
-        from qdil.envs.warp_startup import announce_warp_kernels
+        from qdil.envs.warp_physics import WarpBatch  # optional dependency
+        from qdil.envs.warp_startup import announce_warp_kernels, import_warp
 
         announce_warp_kernels(import_warp()[0])  # the first step may wait for a compile
         return WarpBatch(

@@ -78,6 +78,9 @@ class HostFace:
         returns, lengths, measures = self.env.episode_statistics()
         return torch.from_numpy(returns), torch.from_numpy(lengths), torch.from_numpy(measures)
 
+    def narrow(self, mask: torch.Tensor) -> None:
+        """Nothing to do: the numpy face steps only the sub-environments a step's mask names."""
+
     def step(self, actions: torch.Tensor, mask: torch.Tensor | None = None) -> TorchStep:
         """The numpy face's ``step`` on (N, A) CPU actions, its arrays as tensors.
 

@@ -99,6 +99,15 @@ class TorchFace(Protocol):
         """
         ...
 
+    def narrow(self, mask: torch.Tensor) -> None:
+        """Simulate only the sub-environments in ``mask`` until the next reset (a hint).
+
+        Where the physics steps every simulation of a batch (MuJoCo Warp), the ones in the
+        (N,) bool ``mask`` move to a smaller batch and the others stop costing physics;
+        results do not change. Steps must then leave the others out of their ``mask``.
+        """
+        ...
+
     def step(self, actions: torch.Tensor, mask: torch.Tensor | None = None) -> TorchStep:
         """Advance the sub-environments by one env step.
 

@@ -157,6 +157,14 @@ class TorchVectorEnv:
             self._top_up()
         return self._obs, self._contacts()
 
+    def narrow(self, mask: torch.Tensor) -> None:
+        """Simulate only the sub-environments in the (N,) bool ``mask`` until the next reset.
+
+        The physics moves them to a smaller batch (:meth:`WarpBatch.narrow`); a reset moves
+        them back. One host sync (the number of simulations kept sets the batch's size).
+        """
+        self.physics.narrow(torch.nonzero(mask).flatten())
+
     def step(self, actions: torch.Tensor, mask: torch.Tensor | None = None) -> TorchStep:
         """Advance the sub-environments by one env step, on the device.
 

@@ -17,8 +17,10 @@ What differs from the C engine, and why the results agree only within a toleranc
 - MuJoCo Warp computes in float32 (the C engine in float64);
 - it has no PGS solver: a model that asks for PGS (gymnasium's Humanoid) must be switched to
   Newton by the caller, which changes its dynamics (the ``Humanoid-v5-newton`` task);
-- it steps every world in each call. A world left out of ``step(active=...)`` is restored to
-  its state from before the call, so it keeps its state as in :class:`MujocoBatch`.
+- it steps every world of a ``Data`` in each call. A world left out of ``step(active=...)``
+  is restored to its state from before the call, so it keeps its state as in
+  :class:`MujocoBatch`; :meth:`WarpBatch.narrow` moves the worlds that will still be
+  stepped into a smaller ``Data``, so that the others stop costing physics.
 
 Foot contacts are evaluated at the new state after each step exactly as the C engine does
 it: kinematics, collision detection and the position-stage sensors (MuJoCo ``contact``
@@ -37,28 +39,8 @@ import torch
 from typing_extensions import override
 
 from qdil.envs.physics_base import Export, PhysicsBatch, reset_ids
-
-
-def import_warp() -> tuple[Any, Any]:
-    """``(warp, mujoco_warp)``, or an ImportError that says how to install them."""
-    from qdil.envs.warp_startup import cuda_driver_found, native_stderr_silenced
-
-    try:
-        import warp
-
-        warp.config.quiet = True  # before mujoco_warp's import initialises Warp (banner)
-        warp.config.log_level = warp.LOG_WARNING  # no line per kernel module loaded
-        # without a CUDA driver Warp's C library prints a "Warp CUDA warning" whatever the
-        # config; such a machine runs Warp on its CPU only, so the line is noise there
-        with native_stderr_silenced(not cuda_driver_found()):
-            warp.init()
-        import mujoco_warp
-    except ImportError as error:
-        raise ImportError(
-            "env.backend: warp needs MuJoCo Warp; install it with "
-            '`pip install -e ".[warp]"` (mujoco-warp and warp-lang)'
-        ) from error
-    return warp, mujoco_warp
+from qdil.envs.warp_startup import import_warp
+from qdil.envs.warp_worlds import Worlds, copy_states
 
 
 class WarpBatch(PhysicsBatch):
@@ -83,6 +65,8 @@ class WarpBatch(PhysicsBatch):
         torch_exported: (N, E) float32 tensor on the device, the same values.
         torch_sensordata: (N, nsensordata) float32 tensor on the device.
         torch_device: ``device``.
+        world_steps: env steps simulated so far, summed over the worlds each one advanced
+            (narrowed worlds count once each; the cost of physics on a device).
 
     ``exported`` and ``sensordata`` are host copies of :attr:`torch_exported` and
     :attr:`torch_sensordata`, made by :meth:`step` and :meth:`reset`.
@@ -120,16 +104,18 @@ class WarpBatch(PhysicsBatch):
         self.num_threads = 1
         self.rne_post_constraint = rne_post_constraint
         self.warp_device = str(device)  # Warp's name of it: "cpu", "cuda" or "cuda:N"
+        self.torch_device = device
         with self.warp.ScopedDevice(self.warp_device):
             self.wmodel = self.mjw.put_model(model)
-            self.wdata = self.mjw.make_data(model, nworld=num_sims)
-            size = mujoco.mj_stateSize(model, self._state)
-            self._saved = self.warp.zeros((num_sims, size), dtype=float)
-            self._keep = self.warp.zeros(num_sims, dtype=bool)
+            self._all = Worlds.make(self.warp, self.mjw, model, num_sims, self._state)
             self._reset_mask = self.warp.zeros(num_sims, dtype=bool)
             # later launches go on torch's stream (_on_torch_stream): finish these first
             self.warp.synchronize_device(self.warp_device)
-        self.torch_device = device
+        self.wdata = self._all.data
+        self._worlds = self._all  # the worlds stepped: all, or a narrowed batch of them
+        self._rows: torch.Tensor | None = None  # narrowed: (size,) world of each of _worlds
+        self._narrowed: dict[int, Worlds] = {}  # smaller batches by size, made when first used
+        self.world_steps = 0
         self.graphs = graphs
         self._graphs: dict[tuple, Any] = {}  # None: launched from Python
         # a CUDA graph cannot be recorded on torch's legacy default stream: record on one
@@ -142,7 +128,6 @@ class WarpBatch(PhysicsBatch):
                 raise ValueError(f"export of {field!r}: MuJoCo Warp's Data has no such field")
         self.torch_exported = torch.zeros(self.exported.shape, device=self.torch_device)
         self.torch_sensordata = torch.zeros(self.sensordata.shape, device=self.torch_device)
-        self._ctrl = self._tensor("ctrl")
         self._qpos = self._tensor("qpos")
         self._qvel = self._tensor("qvel")
 
@@ -159,9 +144,8 @@ class WarpBatch(PhysicsBatch):
         return self.warp.ScopedStream(self.warp.stream_from_torch(stream))
 
     def _tensor(self, field: str) -> torch.Tensor:
-        """(N, size) zero-copy torch view of a Warp ``Data`` field."""
-        tensor = self.warp.to_torch(getattr(self.wdata, field))
-        return tensor.reshape(self.num_sims, -1)
+        """(N, size) zero-copy torch view of a Warp ``Data`` field of all worlds."""
+        return self._all.field(self.warp, field)
 
     @override
     def step(
@@ -197,35 +181,106 @@ class WarpBatch(PhysicsBatch):
             ctrl: (N, nu) float32 controls on :attr:`torch_device`.
             nstep: number of ``step`` calls (the task's frame skip).
             active: (N,) bool tensor of simulations to step; ``None`` for all. The others are
-                restored after the call (every world is stepped: a mask saves no work).
+                restored after the call (every world of the stepped ``Data`` is stepped: a
+                mask saves no work, :meth:`narrow` does). After :meth:`narrow`, the worlds
+                it left out are not stepped whatever ``active`` says.
         """
-        mjw, warp = self.mjw, self.warp
+        mjw, warp, worlds, rows = self.mjw, self.warp, self._worlds, self._rows
+        if rows is not None:  # the narrowed batch's own controls and mask
+            ctrl = ctrl[rows]
+            active = None if active is None else active[rows]
+        self.world_steps += worlds.size
         with self._on_torch_stream():
             if active is not None:  # remember the worlds that sit out, to restore them after
-                warp.to_torch(self._keep).copy_(~active)
-                mjw.get_state(self.wmodel, self.wdata, self._saved, self._state)
-            self._ctrl.copy_(ctrl)
-            self._launch(("step", nstep), lambda: self._substeps(nstep))
+                warp.to_torch(worlds.keep).copy_(~active)
+                mjw.get_state(self.wmodel, worlds.data, worlds.saved, self._state)
+            worlds.ctrl.copy_(ctrl)
+            key = (worlds.size,)
+            self._launch(("step", nstep, *key), lambda: self._substeps(nstep, worlds.data))
             if active is not None:
-                mjw.set_state(self.wmodel, self.wdata, self._saved, self._state, self._keep)
+                mjw.set_state(self.wmodel, worlds.data, worlds.saved, self._state, worlds.keep)
             # exports read the post-step data (cfrc_ext, ...) before collision overwrites it
-            exported = torch.cat([self._tensor(f)[:, a:b] for f, a, b in self._bounds], dim=1)
+            exported = torch.cat([worlds.field(warp, f)[:, a:b] for f, a, b in self._bounds], dim=1)
             if self.model.nsensordata:
-                self._launch(("sensors",), self._sensor_pass)
-            self._store_where(active, exported, self._tensor("sensordata"))
+                self._launch(("sensors", *key), lambda: self._sensor_pass(worlds.data))
+            sensors = worlds.field(warp, "sensordata")
+            if rows is None:
+                self._store_where(active, exported, sensors)
+            else:
+                self._scatter(rows, active, exported, sensors)
 
-    def _substeps(self, nstep: int) -> None:
+    def _substeps(self, nstep: int, data: Any) -> None:
         """Launch ``nstep`` MuJoCo Warp steps (and ``rne_postconstraint`` if asked)."""
         for _ in range(nstep):
-            self.mjw.step(self.wmodel, self.wdata)
+            self.mjw.step(self.wmodel, data)
         if self.rne_post_constraint:
-            self.mjw.rne_postconstraint(self.wmodel, self.wdata)
+            self.mjw.rne_postconstraint(self.wmodel, data)
 
-    def _sensor_pass(self) -> None:
+    def _sensor_pass(self, data: Any) -> None:
         """Launch the position stage that evaluates the contact sensors at the new state."""
-        self.mjw.kinematics(self.wmodel, self.wdata)
-        self.mjw.collision(self.wmodel, self.wdata)
-        self.mjw.sensor_pos(self.wmodel, self.wdata)
+        self.mjw.kinematics(self.wmodel, data)
+        self.mjw.collision(self.wmodel, data)
+        self.mjw.sensor_pos(self.wmodel, data)
+
+    def _scatter(
+        self,
+        rows: torch.Tensor,
+        active: torch.Tensor | None,
+        exported: torch.Tensor,
+        sensors: torch.Tensor,
+    ) -> None:
+        """Write a narrowed batch's fresh exports and sensors into rows ``rows`` (size,).
+
+        Padding worlds repeat the first row and compute what it computes: writing them
+        again writes the same values.
+        """
+        if active is not None:
+            exported = torch.where(active[:, None], exported, self.torch_exported[rows])
+            sensors = torch.where(active[:, None], sensors, self.torch_sensordata[rows])
+        self.torch_exported[rows] = exported
+        self.torch_sensordata[rows] = sensors
+
+    def narrow(self, rows: torch.Tensor | None) -> None:
+        """Step only the worlds ``rows`` from now on, in a ``Data`` of fewer worlds.
+
+        Their states move to a batch of the next power of two of worlds (padded with copies
+        of the first), made at its first use and kept; the other worlds keep their states
+        and stop costing physics until :meth:`widen` (which :meth:`reset_where` calls).
+        A world computes the same bits in either batch (``tests/envs/test_warp_narrow.py``).
+        Each call starts from all N worlds (the ones narrowed before are written back first).
+
+        Args:
+            rows: (M,) int64 tensor of distinct world indices on the device (M ≥ 1), or
+                ``None`` to :meth:`widen`.
+        """
+        size = self.num_sims if rows is None else 1 << max(len(rows) - 1, 0).bit_length()
+        self.widen()
+        if rows is None or size >= self.num_sims:
+            return
+        target = self._narrowed.get(size)
+        if target is None:
+            with self.warp.ScopedDevice(self.warp_device):
+                target = Worlds.make(self.warp, self.mjw, self.model, size, self._state)
+                self.warp.synchronize_device(self.warp_device)
+            self._narrowed[size] = target
+        rows = rows.to(torch.int64)
+        padded = torch.cat([rows, rows[:1].expand(size - len(rows))])
+        with self._on_torch_stream():
+            copy_states(*self._copy, (self._all, padded), (target, None))
+        self._worlds, self._rows = target, padded
+
+    def widen(self) -> None:
+        """Write a narrowed batch's states back into their worlds, and step all N again."""
+        if self._rows is None:
+            return
+        with self._on_torch_stream():
+            copy_states(*self._copy, (self._worlds, None), (self._all, self._rows))
+        self._worlds, self._rows = self._all, None
+
+    @property
+    def _copy(self) -> tuple[Any, Any, Any, int]:
+        """The first arguments of :func:`~qdil.envs.warp_worlds.copy_states`."""
+        return self.warp, self.mjw, self.wmodel, self._state
 
     def _observed_stages(self) -> None:
         """Launch ``forward`` up to the actuator forces: all that exports and sensors read.
@@ -319,6 +374,7 @@ class WarpBatch(PhysicsBatch):
             qpos: (N, nq) positions; only the masked rows are read.
             qvel: (N, nv) velocities; only the masked rows are read.
         """
+        self.widen()
         mjw, warp = self.mjw, self.warp
         column = mask[:, None]
         with self._on_torch_stream():

@@ -1,6 +1,7 @@
-"""What Warp prints when a run starts: no false alarm, and a word before a long wait.
+"""Starting Warp: its import, no false alarm, and a word before a long wait.
 
-Two things a user met on the Warp backend's CPU device:
+:func:`import_warp` imports Warp and MuJoCo Warp (or says how to install them). Two things
+a user met on the Warp backend's CPU device:
 
 - Warp's C library prints "Warp CUDA warning: Could not find or load the NVIDIA CUDA
   driver" on every machine without one, whatever ``warp.config`` says. Such a machine can
@@ -72,3 +73,23 @@ def announce_warp_kernels(warp: Any) -> None:
         file=sys.stderr,
         flush=True,
     )
+
+
+def import_warp() -> tuple[Any, Any]:
+    """``(warp, mujoco_warp)``, or an ImportError that says how to install them."""
+    try:
+        import warp
+
+        warp.config.quiet = True  # before mujoco_warp's import initialises Warp (banner)
+        warp.config.log_level = warp.LOG_WARNING  # no line per kernel module loaded
+        # without a CUDA driver Warp's C library prints a "Warp CUDA warning" whatever the
+        # config; such a machine runs Warp on its CPU only, so the line is noise there
+        with native_stderr_silenced(not cuda_driver_found()):
+            warp.init()
+        import mujoco_warp
+    except ImportError as error:
+        raise ImportError(
+            "env.backend: warp needs MuJoCo Warp; install it with "
+            '`pip install -e ".[warp]"` (mujoco-warp and warp-lang)'
+        ) from error
+    return warp, mujoco_warp

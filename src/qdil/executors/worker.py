@@ -142,7 +142,7 @@ class ShardWorker:
             rows = call.actor.num_models * call.episodes
             noise = NoiseReplay(call.noise_state, rows, call.actor.sizes[-1], start, stop)
         self.player = (call.number, player, policies, noise)
-        while not player.finished:
+        while player.still_running():
             self._step()
         return player.played()
 

@@ -130,11 +130,25 @@ class EpisodePlayer:
         self.steps: list[dict[str, torch.Tensor]] = []
         self.active: list[torch.Tensor] = []  # (N,) bool per step: the slots it advanced
         self.num_steps = 0
+        self._simulated = n  # slots the face simulates (narrowed to the running ones)
 
     @property
     def finished(self) -> bool:
         """Whether every slot's episode has ended (a read on the host)."""
         return not bool(self.running.any())
+
+    def still_running(self) -> bool:
+        """Whether any slot's episode runs (a read on the host), narrowing the face.
+
+        Once at most half of the slots the face simulates still run, the face is told to
+        simulate those alone (:meth:`TorchFace.narrow`): on a device the ended episodes
+        stop costing physics, and nothing else changes.
+        """
+        running = int(self.running.sum())
+        if 0 < running <= self._simulated // 2:
+            self.env.narrow(self.running)
+            self._simulated = running
+        return running > 0
 
     @property
     def last_rewards(self) -> torch.Tensor:
@@ -300,7 +314,7 @@ def evaluate_groups(
         return torch.cat(norm), torch.cat(actions), joined
 
     every = env.sync_every if sync_every is None else sync_every
-    while player.num_steps % every or not player.finished:
+    while player.num_steps % every or player.still_running():
         player.step(policy)
     return [
         score(player.played(rows), group.actor.num_models, group.episodes, reward_fn)
