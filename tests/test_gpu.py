@@ -87,3 +87,39 @@ def test_a_rollout_does_not_sync_with_the_host_per_step(tmp_path: Path) -> None:
     syncs = [w for w in caught if "synchroniz" in str(w.message)]
     # the reset-noise queues are topped up every `depth` steps; nothing else syncs
     assert len(syncs) <= steps // depth, [str(w.message) for w in syncs]
+
+
+def test_a_narrowed_evaluation_equals_a_wide_one_on_cuda(monkeypatch) -> None:
+    """Ended episodes leave the batch on the GPU too, and the scores stay.
+
+    On Warp's CPU device narrowing changes no bit (``tests/envs/test_warp_narrow.py``); here
+    the same evaluation is played with and without it on CUDA.
+    """
+    import numpy as np
+
+    from qdil.envs.vector import LocomotionVectorEnv
+    from qdil.rl.episodes import EvaluationGroup, evaluate_groups
+    from qdil.rl.networks import VectorizedActor
+
+    actor = VectorizedActor(3, 17, 6)
+    solutions = np.stack([actor.initial_solution(17, 6, seed=s) for s in range(3)])
+    actor.set_solutions(solutions * np.array([3.0, 30.0, 10.0])[:, None])
+    actor, stats = actor.to("cuda"), RunningMeanStd(3, (17,), device="cuda")
+
+    def evaluate() -> tuple[list, int]:
+        env = LocomotionVectorEnv(
+            "Walker2d-v5", 96, max_episode_steps=60, autoreset_mode="Disabled",
+            backend="warp", device="cuda",
+        )  # fmt: skip
+        face = TorchVectorEnv(env)
+        generator = torch.Generator(device="cuda").manual_seed(2)
+        group = EvaluationGroup(actor, stats, 32, 9, generator)
+        return evaluate_groups(face, [group], sync_every=4), env.physics.world_steps
+
+    (narrowed,), narrowed_steps = evaluate()
+    monkeypatch.setattr(TorchVectorEnv, "narrow", lambda self, mask: None)
+    (wide,), wide_steps = evaluate()
+    np.testing.assert_array_equal(narrowed.lengths, wide.lengths)
+    np.testing.assert_allclose(narrowed.true_objective, wide.true_objective, rtol=1e-6)
+    np.testing.assert_allclose(narrowed.measures, wide.measures, rtol=1e-6)
+    assert narrowed_steps < wide_steps
