@@ -41,3 +41,16 @@ def test_the_ratio_is_of_means_and_its_interval_holds_it() -> None:
 def test_one_seed_gives_a_ratio_without_an_interval() -> None:
     ratio = ratio_of_means([2.0], [1.0, 1.0])
     assert ratio.value == 2.0 and math.isnan(ratio.low) and math.isnan(ratio.high)
+
+
+def test_a_denominator_whose_mean_may_be_zero_gives_no_bounded_interval() -> None:
+    # raw QD-Scores near zero and of either sign (HalfCheetah at 50 iterations)
+    ratio = ratio_of_means([4.7e4, -6.0e4, 1.5e5], [3.0e5, -1.4e5])
+    assert not ratio.bounded
+    assert (ratio.low, ratio.high) == (-math.inf, math.inf)
+    assert ratio.value == pytest.approx(np.mean([4.7e4, -6.0e4, 1.5e5]) / 8.0e4)
+    # the same spread, far from zero: bounded
+    assert ratio_of_means([4.7e4, -6.0e4, 1.5e5], [3.0e6, 2.6e6]).bounded
+    # one seed: bounded unless it is zero
+    assert ratio_of_means([1.0, 2.0], [3.0]).bounded
+    assert not ratio_of_means([1.0, 2.0], [0.0]).bounded

@@ -151,11 +151,13 @@ def build_document(
         blocks += [doc.heading("Ratios to the expert and to GAIL")]
         blocks += [
             doc.text(
-                "Ratio of the methods' mean raw QD-Scores over seeds, with a 95 % percentile "
+                "Ratio of the methods' mean QD-Scores over seeds (raw: the paper's sum of "
+                "returns; offset: PPGA's, which stays positive), with a 95 % percentile "
                 "bootstrap interval that resamples each method's seeds (crude with 3 seeds, "
-                "none with 1). Seeds to resolve: seeds per method a two-sided t-test "
-                "(α = 0.05, power 0.8) would need to find the observed gap, from the pooled "
-                "spread."
+                "none with 1). Where the reference's mean QD-Score may be 0 (its own "
+                "interval holds 0) the ratio has no bounded interval and says so. Seeds to "
+                "resolve: seeds per method a two-sided t-test (α = 0.05, power 0.8) would "
+                "need to find the observed gap, from the pooled spread."
             )
         ]
         blocks += [doc.table(*ratio_table(ratios))]

@@ -4,6 +4,8 @@ One convention for every ratio of a report: the ratio of the two methods' means 
 seeds (never a mean of per-seed ratios), with a 95 % percentile bootstrap interval that
 resamples each method's seeds independently (``scipy.stats.bootstrap``). With three seeds a
 bootstrap interval is crude and too narrow; the report says how many seeds it rests on.
+Where the denominator's mean may be zero (its own interval holds 0, as for QD-Scores that
+sum returns of either sign), the ratio has no bounded interval (Fieller) and says so.
 """
 
 from __future__ import annotations
@@ -24,10 +26,13 @@ class Ratio:
 
     Attributes:
         value: the ratio of means (NaN when undefined).
-        low: lower end of the interval (NaN with fewer than 2 seeds on either side).
-        high: upper end of the interval.
+        low: lower end of the interval (NaN with fewer than 2 seeds on either side; -inf
+            where the interval is unbounded).
+        high: upper end of the interval (+inf where unbounded).
         n_numerator: seeds of the numerator.
         n_denominator: seeds of the denominator.
+        bounded: whether the denominator's mean is away from zero: its own interval (at the
+            same level) excludes 0, or, with one seed, it is not 0.
     """
 
     value: float
@@ -35,6 +40,7 @@ class Ratio:
     high: float
     n_numerator: int
     n_denominator: int
+    bounded: bool = True
 
 
 def ratio_of_means(
@@ -52,13 +58,26 @@ def ratio_of_means(
         seed: the resampling's random seed (reports are reproducible).
 
     Returns:
-        The ratio; its interval is NaN where either method has fewer than two seeds.
+        The ratio; its interval is NaN where either method has fewer than two seeds, and
+        (-inf, inf) where the denominator's mean may be zero.
     """
     a = np.asarray(numerator, dtype=np.float64).reshape(-1)
     b = np.asarray(denominator, dtype=np.float64).reshape(-1)
     value = float(np.mean(a) / np.mean(b)) if len(a) and len(b) else math.nan
     low = high = math.nan
-    if len(a) >= 2 and len(b) >= 2 and np.all(np.isfinite(a)) and np.all(np.isfinite(b)):
+    bounded = bool(len(b)) and bool(np.mean(b) != 0)
+    finite = np.all(np.isfinite(a)) and np.all(np.isfinite(b))
+    if len(b) >= 2 and finite:
+        mean_b = stats.bootstrap(
+            (b,),
+            np.mean,
+            n_resamples=RESAMPLES,
+            confidence_level=confidence,
+            method="percentile",
+            random_state=np.random.default_rng(seed),
+        ).confidence_interval
+        bounded = bool(mean_b.low > 0 or mean_b.high < 0)
+    if len(a) >= 2 and len(b) >= 2 and finite:
         result = stats.bootstrap(
             (a, b),
             lambda x, y, axis: np.mean(x, axis=axis) / np.mean(y, axis=axis),
@@ -68,7 +87,9 @@ def ratio_of_means(
             random_state=np.random.default_rng(seed),
         )
         low, high = float(result.confidence_interval.low), float(result.confidence_interval.high)
-    return Ratio(value, low, high, len(a), len(b))
+        if not bounded:
+            low, high = -math.inf, math.inf
+    return Ratio(value, low, high, len(a), len(b), bounded)
 
 
 def seeds_to_resolve(

@@ -168,7 +168,8 @@ def _write_files(
     (out / "tukey.md").write_text(tukey_md + "\n\n" + "\n".join(notes) + "\n")
     fields = ["task", "group1", "group2", "n1", "n2", "mean1", "mean2", "diff", "sign"]
     write_csv(out / "tukey.csv", tukey_records(report.tukey), [*fields, "pvalue", "significant"])
-    ratio_fields = ["task", "archive", "ratio", "value", "low", "high", "n", "seeds_to_resolve"]
+    ratio_fields = ["task", "archive", "qd_score", "ratio", "value", "low", "high", "bounded"]
+    ratio_fields += ["n", "seeds_to_resolve"]
     write_csv(out / "ratios.csv", ratio_records(groups), ratio_fields)
     run_rows = run_records(report.runs)
     write_csv(out / "runs.csv", run_rows, list(run_rows[0]) if run_rows else ["path"])

@@ -143,54 +143,66 @@ RATIO_REFERENCES = (DISPLAY_NAMES["true_reward"], DISPLAY_NAMES["gail"])
 """The methods every other method's QD-Score is divided by: the expert and GAIL."""
 
 
+RATIO_SCORES = {"qd_score": "raw", "qd_score_offset": "offset"}
+"""The QD-Scores ratios are taken of: the paper's raw sum of returns, and PPGA's offset one
+(positive, so its ratios are defined where raw QD-Scores lie near zero)."""
+
+
 def ratio_records(groups: Groups) -> list[dict[str, Any]]:
-    """Raw QD-Score ratios of every method to the expert and to GAIL, both archives.
+    """QD-Score ratios of every method to the expert and to GAIL, both archives, raw and offset.
 
     One convention: the ratio of the means over seeds, with a 95 % bootstrap interval
-    (:func:`qdil.evaluation.ratios.ratio_of_means`), and the seeds per method a t-test
-    would need to find the gap (:func:`qdil.evaluation.ratios.seeds_to_resolve`).
+    (:func:`qdil.evaluation.ratios.ratio_of_means`; unbounded where the reference's mean may
+    be zero), and the seeds per method a t-test would need to find the gap
+    (:func:`qdil.evaluation.ratios.seeds_to_resolve`).
 
     Returns:
-        One record per task, archive, method and reference present (CSV rows).
+        One record per task, archive, QD-Score, method and reference present (CSV rows).
     """
     records = []
     for task, runs_by_method in groups.items():
         for archive in ARCHIVES:
-            for reference in RATIO_REFERENCES:
-                if reference not in runs_by_method:
-                    continue
-                below = metric_values(runs_by_method[reference], "qd_score", 1.0, archive)
-                for method, runs in runs_by_method.items():
-                    above = metric_values(runs, "qd_score", 1.0, archive)
-                    if method == reference or np.isnan(above).all() or np.isnan(below).all():
+            for key, score in RATIO_SCORES.items():
+                for reference in RATIO_REFERENCES:
+                    if reference not in runs_by_method:
                         continue
-                    ratio = ratio_of_means(above, below)
-                    records.append(
-                        {
-                            "task": task,
-                            "archive": archive,
-                            "ratio": f"{method} / {reference}",
-                            "value": ratio.value,
-                            "low": ratio.low,
-                            "high": ratio.high,
-                            "n": f"{ratio.n_numerator}/{ratio.n_denominator}",
-                            "seeds_to_resolve": seeds_to_resolve(above, below),
-                        }
-                    )
+                    below = metric_values(runs_by_method[reference], key, 1.0, archive)
+                    for method, runs in runs_by_method.items():
+                        above = metric_values(runs, key, 1.0, archive)
+                        if method == reference or np.isnan(above).all() or np.isnan(below).all():
+                            continue
+                        ratio = ratio_of_means(above, below)
+                        records.append(
+                            {
+                                "task": task,
+                                "archive": archive,
+                                "qd_score": score,
+                                "ratio": f"{method} / {reference}",
+                                "value": ratio.value,
+                                "low": ratio.low,
+                                "high": ratio.high,
+                                "bounded": ratio.bounded,
+                                "n": f"{ratio.n_numerator}/{ratio.n_denominator}",
+                                "seeds_to_resolve": seeds_to_resolve(above, below),
+                            }
+                        )
     return records
 
 
 def ratio_table(records: Sequence[Mapping[str, Any]]) -> tuple[list[str], list[list[str]]]:
     """The ratio records as text: ``0.86 [0.73, 1.03]`` and the seeds a gap would need."""
-    header = ["Task", "Archive", "Ratio of raw QD-Scores", "value [95 % interval]", "n"]
+    header = ["Task", "Archive", "QD-Score", "Ratio", "value [95 % interval]", "n"]
     header.append("seeds to resolve")
     rows = []
     for r in records:
         cell = f"{r['value']:.2f}"
-        if not math.isnan(r["low"]):
+        if not r["bounded"]:
+            cell += ", unbounded: the reference's mean may be 0"
+        elif not math.isnan(r["low"]):
             cell += f" [{r['low']:.2f}, {r['high']:.2f}]"
         needed = "–" if r["seeds_to_resolve"] is None else str(r["seeds_to_resolve"])
-        rows.append([_short(r["task"]), ARCHIVES[r["archive"]], r["ratio"], cell, r["n"], needed])
+        archive = ARCHIVES[r["archive"]]
+        rows.append([_short(r["task"]), archive, r["qd_score"], r["ratio"], cell, r["n"], needed])
     return header, rows
 
 
