@@ -80,6 +80,8 @@ def test_widening_writes_the_narrowed_states_back() -> None:
     physics.widen()
     np.testing.assert_array_equal(physics._tensor("qpos")[[2, 7]].numpy(), narrowed_qpos.numpy())
     assert physics._rows is None
+    face.narrow(torch.zeros(NUM, dtype=torch.bool))  # nothing runs: the batch stays whole
+    assert physics._rows is None and physics._worlds.size == NUM
 
 
 def _policies(count: int) -> tuple[VectorizedActor, RunningMeanStd]:

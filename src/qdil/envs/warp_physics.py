@@ -114,6 +114,7 @@ class WarpBatch(PhysicsBatch):
         self.wdata = self._all.data
         self._worlds = self._all  # the worlds stepped: all, or a narrowed batch of them
         self._rows: torch.Tensor | None = None  # narrowed: (size,) world of each of _worlds
+        self._held = num_sims  # worlds held by _worlds; narrowed, the rest pad its batch
         self._narrowed: dict[int, Worlds] = {}  # smaller batches by size, made when first used
         self.world_steps = 0
         self.graphs = graphs
@@ -206,8 +207,10 @@ class WarpBatch(PhysicsBatch):
             sensors = worlds.field(warp, "sensordata")
             if rows is None:
                 self._store_where(active, exported, sensors)
-            else:
-                self._scatter(rows, active, exported, sensors)
+            else:  # the padding worlds' results are dropped
+                held = slice(0, self._held)
+                mask = None if active is None else active[held]
+                self._scatter(rows[held], mask, exported[held], sensors[held])
 
     def _substeps(self, nstep: int, data: Any) -> None:
         """Launch ``nstep`` MuJoCo Warp steps (and ``rne_postconstraint`` if asked)."""
@@ -229,11 +232,7 @@ class WarpBatch(PhysicsBatch):
         exported: torch.Tensor,
         sensors: torch.Tensor,
     ) -> None:
-        """Write a narrowed batch's fresh exports and sensors into rows ``rows`` (size,).
-
-        Padding worlds repeat the first row and compute what it computes: writing them
-        again writes the same values.
-        """
+        """Write fresh exports and sensors of worlds ``rows`` (M,) where ``active`` (M,) holds."""
         if active is not None:
             exported = torch.where(active[:, None], exported, self.torch_exported[rows])
             sensors = torch.where(active[:, None], sensors, self.torch_sensordata[rows])
@@ -244,16 +243,18 @@ class WarpBatch(PhysicsBatch):
         """Step only the worlds ``rows`` from now on, in a ``Data`` of fewer worlds.
 
         Their states move to a batch of the next power of two of worlds (padded with copies
-        of the first), made at its first use and kept; the other worlds keep their states
-        and stop costing physics until :meth:`widen` (which :meth:`reset_where` calls).
+        of the first, whose results are dropped), made at its first use and kept; the other
+        worlds keep their states and stop costing physics until :meth:`widen` (which
+        :meth:`reset_where` calls).
         A world computes the same bits in either batch (``tests/envs/test_warp_narrow.py``).
         Each call starts from all N worlds (the ones narrowed before are written back first).
 
         Args:
-            rows: (M,) int64 tensor of distinct world indices on the device (M ≥ 1), or
-                ``None`` to :meth:`widen`.
+            rows: (M,) int64 tensor of distinct world indices on the device, or ``None`` to
+                :meth:`widen` (as does an empty one: nothing is left to narrow to).
         """
-        size = self.num_sims if rows is None else 1 << max(len(rows) - 1, 0).bit_length()
+        empty = rows is None or not len(rows)
+        size = self.num_sims if empty else 1 << (len(rows) - 1).bit_length()
         self.widen()
         if rows is None or size >= self.num_sims:
             return
@@ -267,15 +268,16 @@ class WarpBatch(PhysicsBatch):
         padded = torch.cat([rows, rows[:1].expand(size - len(rows))])
         with self._on_torch_stream():
             copy_states(*self._copy, (self._all, padded), (target, None))
-        self._worlds, self._rows = target, padded
+        self._worlds, self._rows, self._held = target, padded, len(rows)
 
     def widen(self) -> None:
         """Write a narrowed batch's states back into their worlds, and step all N again."""
         if self._rows is None:
             return
         with self._on_torch_stream():
-            copy_states(*self._copy, (self._worlds, None), (self._all, self._rows))
-        self._worlds, self._rows = self._all, None
+            held = slice(0, self._held)
+            copy_states(*self._copy, (self._worlds, held), (self._all, self._rows[held]))
+        self._worlds, self._rows, self._held = self._all, None, self.num_sims
 
     @property
     def _copy(self) -> tuple[Any, Any, Any, int]:

@@ -51,7 +51,7 @@ def copy_states(
     mjw: Any,
     wmodel: Any,
     state: int,
-    source: tuple[Worlds, torch.Tensor | None],
+    source: tuple[Worlds, torch.Tensor | slice | None],
     target: tuple[Worlds, torch.Tensor | None],
 ) -> None:
     """Copy integration states from worlds of one batch into worlds of another.
@@ -66,9 +66,10 @@ def copy_states(
         mjw: the ``mujoco_warp`` module.
         wmodel: the model on the device.
         state: ``mujoco_warp.State`` flags of the state copied.
-        source: a batch and the (n,) int64 indices of its worlds to copy (``None``: all).
+        source: a batch and the (n,) int64 indices (or a slice) of its worlds to copy
+            (``None``: all).
         target: a batch and the (n,) indices of its worlds that receive them, in the same
-            order (``None``: all); repeated indices must receive equal states.
+            order (``None``: all).
     """
     (giver, picked), (taker, placed) = source, target
     mjw.get_state(wmodel, giver.data, giver.saved, state)
