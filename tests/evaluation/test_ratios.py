@@ -53,4 +53,5 @@ def test_a_denominator_whose_mean_may_be_zero_gives_no_bounded_interval() -> Non
     assert ratio_of_means([4.7e4, -6.0e4, 1.5e5], [3.0e6, 2.6e6]).bounded
     # one seed: bounded unless it is zero
     assert ratio_of_means([1.0, 2.0], [3.0]).bounded
-    assert not ratio_of_means([1.0, 2.0], [0.0]).bounded
+    zero = ratio_of_means([1.0, 2.0], [0.0])
+    assert not zero.bounded and math.isnan(zero.value)

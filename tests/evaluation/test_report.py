@@ -281,28 +281,22 @@ def test_the_deployable_archives_are_tabled_beside_the_true_keyed_ones(
     assert rows["true2"]["deployable_source"].startswith("training archive")
 
 
+METHODS = ("AIRL-Bonus", "PPGA-trueReward")
+
+
 def test_ratios_to_the_expert_are_ratios_of_the_runs_means(made: SimpleNamespace) -> None:
     runs = [r for r in read_csv(made.out / "runs.csv") if r["status"].startswith("included")]
     ratios = read_csv(made.out / "ratios.csv")
-    assert {r["archive"] for r in ratios} == {"true", "deployable"}
-    assert {r["qd_score"] for r in ratios} == {"raw", "offset"}
+    assert len({(r["archive"], r["qd_score"]) for r in ratios}) == 4  # both archives, both scores
     by_name = {(r["archive"], r["qd_score"], r["ratio"]): r for r in ratios}
-    columns = (
-        ("true", "raw", "qd_score"),
-        ("deployable", "raw", "deployable_qd_score"),
-        ("true", "offset", "qd_score_offset"),
-    )
-    for archive, score, column in columns:
-        means = {
-            method: np.mean([float(r[column]) for r in runs if r["method"] == method])
-            for method in ("AIRL-Bonus", "PPGA-trueReward")
-        }
+    columns = {"qd_score": ("true", "raw"), "deployable_qd_score": ("deployable", "raw")}
+    for column, (archive, score) in {**columns, "qd_score_offset": ("true", "offset")}.items():
+        airl, expert = ([float(r[column]) for r in runs if r["method"] == m] for m in METHODS)
         row = by_name[(archive, score, "AIRL-Bonus / PPGA-trueReward")]
-        assert float(row["value"]) == pytest.approx(means["AIRL-Bonus"] / means["PPGA-trueReward"])
+        assert float(row["value"]) == pytest.approx(np.mean(airl) / np.mean(expert))
         assert float(row["low"]) <= float(row["value"]) <= float(row["high"]) and row["n"] == "3/3"
         # bounded where the expert's seeds share a sign (with 3 seeds the bootstrap's 2.5 %
         # quantile of their mean is the lowest seed: 1/27 of resamples repeat it thrice)
-        expert = [float(r[column]) for r in runs if r["method"] == "PPGA-trueReward"]
         assert row["bounded"] == str(min(expert) > 0 or max(expert) < 0)
     assert by_name[("true", "offset", "AIRL-Bonus / PPGA-trueReward")]["bounded"] == "True"
     single = by_name[("true", "raw", "GIRIL / PPGA-trueReward")]

@@ -25,7 +25,7 @@ class Ratio:
     """mean(numerator) / mean(denominator) with its bootstrap interval.
 
     Attributes:
-        value: the ratio of means (NaN when undefined).
+        value: the ratio of means (NaN when undefined: no seeds, or a mean of 0 below).
         low: lower end of the interval (NaN with fewer than 2 seeds on either side; -inf
             where the interval is unbounded).
         high: upper end of the interval (+inf where unbounded).
@@ -63,7 +63,9 @@ def ratio_of_means(
     """
     a = np.asarray(numerator, dtype=np.float64).reshape(-1)
     b = np.asarray(denominator, dtype=np.float64).reshape(-1)
-    value = float(np.mean(a) / np.mean(b)) if len(a) and len(b) else math.nan
+    value = math.nan
+    if len(a) and len(b) and np.mean(b) != 0:
+        value = float(np.mean(a) / np.mean(b))
     low = high = math.nan
     bounded = bool(len(b)) and bool(np.mean(b) != 0)
     finite = np.all(np.isfinite(a)) and np.all(np.isfinite(b))
@@ -78,14 +80,15 @@ def ratio_of_means(
         ).confidence_interval
         bounded = bool(mean_b.low > 0 or mean_b.high < 0)
     if len(a) >= 2 and len(b) >= 2 and finite:
-        result = stats.bootstrap(
-            (a, b),
-            lambda x, y, axis: np.mean(x, axis=axis) / np.mean(y, axis=axis),
-            n_resamples=RESAMPLES,
-            confidence_level=confidence,
-            method="percentile",
-            random_state=np.random.default_rng(seed),
-        )
+        with np.errstate(divide="ignore", invalid="ignore"):  # resamples whose mean is 0
+            result = stats.bootstrap(
+                (a, b),
+                lambda x, y, axis: np.mean(x, axis=axis) / np.mean(y, axis=axis),
+                n_resamples=RESAMPLES,
+                confidence_level=confidence,
+                method="percentile",
+                random_state=np.random.default_rng(seed),
+            )
         low, high = float(result.confidence_interval.low), float(result.confidence_interval.high)
         if not bounded:
             low, high = -math.inf, math.inf
