@@ -26,6 +26,7 @@ from qdil.evaluation.runs import collect_runs
 ROOT = Path(__file__).resolve().parents[2]
 SMOKE = ROOT / "recipes" / "smoke" / "walker_true.yaml"
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+METHODS = ("AIRL-Bonus", "PPGA-trueReward")  # the pairs the tests compare
 
 
 def qdil_fit(*args: str, cwd: Path) -> None:
@@ -191,19 +192,18 @@ def test_profile_csv_counts_the_final_archives_elites(made: SimpleNamespace) -> 
 
 def test_tukey_csv_equals_scipy_on_the_run_values(made: SimpleNamespace) -> None:
     runs = [r for r in read_csv(made.out / "runs.csv") if r["status"] != "left out"]
-    groups = {
-        m: np.array([float(r["qd_score"]) for r in runs if r["method"] == m])
-        for m in ("AIRL-Bonus", "PPGA-trueReward")  # GIRIL has one seed: left out
-    }
-    expected = tukey_hsd(groups["AIRL-Bonus"], groups["PPGA-trueReward"]).pvalue[0, 1]
-    (row,) = read_csv(made.out / "tukey.csv")
-    assert (row["group1"], row["group2"]) == ("AIRL-Bonus", "PPGA-trueReward")
-    assert float(row["pvalue"]) == pytest.approx(expected, rel=1e-9)
-    diff = groups["PPGA-trueReward"].mean() - groups["AIRL-Bonus"].mean()
-    assert float(row["diff"]) == pytest.approx(diff)
-    assert row["sign"] == ("+" if diff > 0 else "-")
+    rows = read_csv(made.out / "tukey.csv")  # GIRIL has one seed: left out
+    for score, column in (("raw", "qd_score"), ("offset", "qd_score_offset")):
+        airl, expert = (
+            np.array([float(r[column]) for r in runs if r["method"] == m]) for m in METHODS
+        )
+        (row,) = [r for r in rows if r["qd_score"] == score]
+        assert (row["group1"], row["group2"]) == METHODS
+        assert float(row["pvalue"]) == pytest.approx(tukey_hsd(airl, expert).pvalue[0, 1], rel=1e-9)
+        assert float(row["diff"]) == pytest.approx(expert.mean() - airl.mean())
+        assert row["sign"] == ("+" if expert.mean() > airl.mean() else "-")
     tukey_md = (made.out / "tukey.md").read_text()
-    assert "| AIRL-Bonus | PPGA-trueReward |" in tukey_md
+    assert "| AIRL-Bonus | PPGA-trueReward |" in tukey_md and "Offset QD-Score" in tukey_md
     assert "GIRIL left out of the Tukey HSD test: 1 seed(s)" in tukey_md
 
 
@@ -279,9 +279,6 @@ def test_the_deployable_archives_are_tabled_beside_the_true_keyed_ones(
     assert deployable == pytest.approx(true, rel=1e-12)
     assert rows["airl0"]["deployable_source"].startswith("corrected")
     assert rows["true2"]["deployable_source"].startswith("training archive")
-
-
-METHODS = ("AIRL-Bonus", "PPGA-trueReward")
 
 
 def test_ratios_to_the_expert_are_ratios_of_the_runs_means(made: SimpleNamespace) -> None:

@@ -41,10 +41,12 @@ class Report:
         out: the output folder.
         runs: every run found (included and left out).
         groups: included runs by task and method.
-        tukey: Tukey HSD results by task.
+        tukey: Tukey HSD results of the raw QD-Score by task.
         main_table: the main table as Markdown.
         files: every file written, relative to ``out``.
         gallery: the videos of elites (none where none were asked for or could be made).
+        tukey_offset: the same test of the offset QD-Score (positive where raw QD-Scores
+            sum returns of either sign near zero).
     """
 
     out: Path
@@ -54,6 +56,7 @@ class Report:
     main_table: str
     files: list[str]
     gallery: Gallery = field(default_factory=lambda: Gallery(VideoSettings(count=0)))
+    tukey_offset: dict[str, TukeyResult] = field(default_factory=dict)
 
 
 def _problem_rows(runs: Sequence[RunResult]) -> list[list[str]]:
@@ -171,6 +174,9 @@ def build_document(
     blocks += [doc.table(header, rows)] if rows else [doc.text("No pair could be tested.")]
     notes = [f"{task}: {note}" for task, res in report.tukey.items() for note in res.notes]
     blocks += [doc.bullets(notes)] if notes else []
+    header, rows = tukey_table(report.tukey_offset)
+    if rows:
+        blocks += [doc.heading("Tukey HSD test of the offset QD-Score", 3), doc.table(header, rows)]
     if profiles is not None and groups:
         blocks += _profile_blocks(groups, profiles)
     blocks += [doc.heading("Learning curves")]

@@ -99,6 +99,7 @@ def write_report(
     results = tukey_tests(groups, reference)
     table_md = doc.markdown_table(*main_table(groups)) if groups else ""
     report = Report(out, runs, groups, results, table_md, [])
+    report.tukey_offset = tukey_tests(groups, reference, "qd_score_offset")
     grids: dict[Path, HeatmapGrid] = {}
     heatmaps = plot_heatmaps(groups, out, grids)
     report.gallery = make_gallery(groups, out, heatmaps, videos or VideoSettings(count=0))
@@ -165,9 +166,13 @@ def _write_files(
     tukey_header, tukey_rows = tukey_table(report.tukey)
     notes = [f"- {t}: {n}" for t, res in report.tukey.items() for n in res.notes]
     tukey_md = doc.markdown_table(tukey_header, tukey_rows) if tukey_rows else "No pair tested."
+    if tukey_rows:
+        offset_md = doc.markdown_table(*tukey_table(report.tukey_offset))
+        tukey_md = f"Raw QD-Score:\n\n{tukey_md}\n\nOffset QD-Score:\n\n{offset_md}"
     (out / "tukey.md").write_text(tukey_md + "\n\n" + "\n".join(notes) + "\n")
-    fields = ["task", "group1", "group2", "n1", "n2", "mean1", "mean2", "diff", "sign"]
-    write_csv(out / "tukey.csv", tukey_records(report.tukey), [*fields, "pvalue", "significant"])
+    fields = ["task", "qd_score", "group1", "group2", "n1", "n2", "mean1", "mean2", "diff"]
+    tukey_rows_csv = tukey_records(report.tukey) + tukey_records(report.tukey_offset, "offset")
+    write_csv(out / "tukey.csv", tukey_rows_csv, [*fields, "sign", "pvalue", "significant"])
     ratio_fields = ["task", "archive", "qd_score", "ratio", "value", "low", "high", "bounded"]
     ratio_fields += ["n", "seeds_to_resolve"]
     write_csv(out / "ratios.csv", ratio_records(groups), ratio_fields)

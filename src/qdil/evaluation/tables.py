@@ -206,20 +206,23 @@ def ratio_table(records: Sequence[Mapping[str, Any]]) -> tuple[list[str], list[l
     return header, rows
 
 
-def tukey_tests(groups: Groups, reference: str | None = None) -> dict[str, TukeyResult]:
-    """Tukey HSD on the raw QD-Score between the methods of each task.
+def tukey_tests(
+    groups: Groups, reference: str | None = None, key: str = "qd_score"
+) -> dict[str, TukeyResult]:
+    """Tukey HSD on a QD-Score (default: the raw one) between the methods of each task.
 
     Args:
         groups: included runs by task and method.
         reference: keep only pairs with this method, oriented so that it is ``group2``
             (the paper's layout: ``+`` means the reference is better).
+        key: the final metric compared, ``qd_score`` or ``qd_score_offset``.
 
     Returns:
         Task -> comparisons and notes.
     """
     results = {}
     for task, runs_by_method in groups.items():
-        values = {m: metric_values(runs, "qd_score") for m, runs in runs_by_method.items()}
+        values = {m: metric_values(runs, key) for m, runs in runs_by_method.items()}
         result = tukey(values)
         if reference is not None:
             result.comparisons = _orient(result.comparisons, reference)
@@ -269,11 +272,12 @@ def tukey_table(results: Mapping[str, TukeyResult]) -> tuple[list[str], list[lis
     return header, rows
 
 
-def tukey_records(results: Mapping[str, TukeyResult]) -> list[dict[str, Any]]:
-    """One record per task and pair (CSV rows)."""
+def tukey_records(results: Mapping[str, TukeyResult], score: str = "raw") -> list[dict[str, Any]]:
+    """One record per task and pair (CSV rows), ``score`` naming the QD-Score compared."""
     return [
         {
             "task": task,
+            "qd_score": score,
             "group1": c.group1,
             "group2": c.group2,
             "n1": c.n1,
