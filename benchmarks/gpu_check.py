@@ -18,13 +18,14 @@ measures, in steady state (kernels compiled and Warp graphs recorded before any 
    3,000 simulations, 128 steps), counted by torch's sync debug mode;
 3. two QD iterations of ``recipes/gpu/walker_mcwae.yaml`` through ``qdil fit``, with each
    phase's seconds from ``metrics.csv`` (the second iteration is the figure: the first
-   records graphs and builds the reward model's optimiser state), then the same with θ_μ
-   and its branches scored one after the other (``--env.eval_envs 3000``) as the baseline
-   of scoring them side by side, and the same without narrowing an evaluation's batch to
-   its running episodes (``WarpBatch.narrow``) as the baseline of narrowing;
-4. the same two QD iterations as ``--runs`` separate ``qdil fit`` processes at once (seeds
-   0, 1, ...) sharing the card, each run's seconds per iteration against the one run of
-   step 3: what several seeds side by side cost;
+   records graphs and builds the reward model's optimiser state), and the same without
+   narrowing an evaluation's batch to its running episodes (``WarpBatch.narrow``) as the
+   baseline of narrowing; when asked for (``--skip ''``), also with θ_μ and its branches
+   scored one after the other (``--env.eval_envs 3000``), the baseline of scoring them
+   side by side;
+4. when asked for, the same two QD iterations as ``--runs`` separate ``qdil fit`` processes
+   at once (seeds 0, 1, ...) sharing the card, each run's seconds per iteration against
+   the one run of step 3: what several seeds side by side cost;
 5. the GPU tests (``pytest -m gpu -n 0 tests/test_gpu.py tests/envs/test_warp_backend.py``).
 
 The probes below a QD iteration (steps 0 to 2) live in ``benchmarks/gpu_probes.py``.
@@ -68,6 +69,8 @@ from gpu_probes import (
 ROOT = Path(__file__).resolve().parents[1]
 GPU_TESTS = ["tests/test_gpu.py", "tests/envs/test_warp_backend.py"]
 PHASES = ("jacobian", "walk", "evaluate", "reward_update")
+MEASURED = ("iterations_in_turns", "side_by_side")
+"""Steps left out unless asked for: measured (docs/guides/gpu.md), and 4 minutes together."""
 # the same recipe, scaled down for Warp's CPU device (--quick): every phase still runs
 QUICK = [
     "--env.num_envs", "6", "--env.max_episode_steps", "40",
@@ -294,7 +297,12 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     parser.add_argument("--quick", action="store_true", help="scaled down (Warp's CPU device)")
     parser.add_argument("--out", type=Path, default=Path("gpu_check"), help="output folder")
     parser.add_argument("--budget", type=float, default=480.0, help="seconds for all steps")
-    parser.add_argument("--skip", default="", help="comma-separated steps to leave out")
+    parser.add_argument(
+        "--skip",
+        default=",".join(MEASURED),
+        help="comma-separated steps to leave out (default: "
+        f"{','.join(MEASURED)}, measured on an H100 on 2026-11-27; --skip '' runs all)",
+    )
     parser.add_argument("--runs", type=int, default=2, help="runs at once for side_by_side")
     parser.add_argument(
         "--set", default="", help="more `qdil fit` overrides, e.g. --set='--bonus.enabled false'"
