@@ -1,0 +1,69 @@
+"""benchmarks/evidence_runs.py: the protocol's queue, its locks and the commands it runs."""
+
+from __future__ import annotations
+
+import importlib.util
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture
+def runner(tmp_path: Path, monkeypatch):
+    spec = importlib.util.spec_from_file_location(
+        "evidence_runs", ROOT / "benchmarks" / "evidence_runs.py"
+    )
+    module = importlib.util.module_from_spec(spec)
+    monkeypatch.setitem(sys.modules, "evidence_runs", module)  # its dataclass looks it up
+    spec.loader.exec_module(module)
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / module.OUT).mkdir(parents=True)
+    return module
+
+
+def test_the_queue_is_the_protocols(runner) -> None:
+    by_task: dict[str, set] = {}
+    for run in runner.QUEUE:
+        by_task.setdefault(run.task, set()).add((run.recipe, run.seed, run.iterations))
+        assert (ROOT / run.recipe).is_file()
+    assert {seed for _, seed, _ in by_task["HalfCheetah-v5"]} == {0, 1, 2}
+    assert {seed for _, seed, _ in by_task["Walker2d-v5"]} == {3, 4}
+    # one budget per task (docs/evidence-protocol.md)
+    assert {its for _, _, its in by_task["HalfCheetah-v5"]} == {50}
+    assert {its for _, _, its in by_task["Walker2d-v5"]} == {120}
+    # torch's thread count at e168ef1 follows NUMBA_NUM_THREADS: 1 for Walker2d's runs
+    assert {r.numba_threads for r in runner.QUEUE if r.task == "Walker2d-v5"} == {1}
+    assert {r.numba_threads for r in runner.QUEUE if r.task == "HalfCheetah-v5"} == {None}
+
+
+def test_a_run_held_by_a_live_slot_is_not_taken(runner) -> None:
+    run = runner.QUEUE[0]
+    lock = runner.OUT / f"{run.name}.lock"
+    with subprocess.Popen(["sleep", "30"]) as holder:
+        lock.write_text(str(holder.pid))
+        assert not runner.take(run)
+        holder.kill()
+    assert runner.take(run)  # its holder is gone: the lock is stale
+    assert lock.read_text() == str(os.getpid())
+
+
+@pytest.mark.parametrize("walker", [False, True])
+def test_each_run_gets_its_thread_setting(runner, monkeypatch, walker: bool) -> None:
+    calls = []
+    monkeypatch.setattr(
+        runner.subprocess, "run", lambda command, check, env: calls.append((command, env))
+    )
+    run = next(r for r in runner.QUEUE if (r.task == "Walker2d-v5") == walker)
+    runner.work(run)
+    (fit, fit_env), (evaluate, eval_env) = calls
+    assert fit[3:5] == ["fit", str(ROOT / run.recipe)] and evaluate[3] == "eval"
+    assert ["--seed", str(run.seed)] == fit[5:7]
+    assert "--episodes" in evaluate and str(runner.EPISODES[run.task]) in evaluate
+    for env in (fit_env, eval_env):
+        expected = "1" if walker else os.environ.get("NUMBA_NUM_THREADS")
+        assert env.get("NUMBA_NUM_THREADS") == expected
