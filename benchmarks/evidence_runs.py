@@ -148,8 +148,8 @@ def work(run: Planned) -> None:
     # another target stops at its checkpoint there; nothing else depends on the target)
     env, prefix = dict(os.environ), ""
     if run.numba_threads is not None:
-        env["NUMBA_NUM_THREADS"] = prefix = str(run.numba_threads)
-        prefix = f"NUMBA_NUM_THREADS={prefix} "
+        env["NUMBA_NUM_THREADS"] = str(run.numba_threads)
+        prefix = f"NUMBA_NUM_THREADS={run.numba_threads} "
     print(f"{prefix}qdil", " ".join(command), f"# {logged} iterations logged", flush=True)
     subprocess.run([sys.executable, "-m", "qdil.cli", *command], check=True, env=env)
     episodes = str(EPISODES[run.task])

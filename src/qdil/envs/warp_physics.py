@@ -253,10 +253,11 @@ class WarpBatch(PhysicsBatch):
             rows: (M,) int64 tensor of distinct world indices on the device, or ``None`` to
                 :meth:`widen` (as does an empty one: nothing is left to narrow to).
         """
-        empty = rows is None or not len(rows)
-        size = self.num_sims if empty else 1 << (len(rows) - 1).bit_length()
         self.widen()
-        if rows is None or size >= self.num_sims:
+        if rows is None or not len(rows):
+            return
+        size = 1 << (len(rows) - 1).bit_length()
+        if size >= self.num_sims:
             return
         target = self._narrowed.get(size)
         if target is None:
