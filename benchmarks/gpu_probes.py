@@ -134,7 +134,8 @@ def step_breakdown(device: str, n: int, repeats: int) -> dict[str, Any]:
     Each Warp sequence of the torch face's step (the frame skip's substeps, the sensor
     pass, the autoreset's reset and its observed stages of ``forward``; MuJoCo Warp's whole
     ``forward``, which autoresets ran before, for comparison) is replayed ``repeats``
-    times from its graph and timed; the whole face step and a collector step too. Warp
+    times from its graph and timed; the whole face step (on CUDA also replayed from one
+    CUDA graph, ``TorchVectorEnv.step_graph``) and a collector step too. Warp
     launches are counted with each sequence launched once from Python, torch operators
     per collector step as the difference of a 2-step and a 1-step rollout.
     """
@@ -164,14 +165,14 @@ def step_breakdown(device: str, n: int, repeats: int) -> dict[str, Any]:
     result: dict[str, Any] = {"num_envs": n, "repeats": repeats, "ms": {}, "warp_launches": {}}
     with physics._on_torch_stream():
         for name, (key, launches) in sequences.items():
-            physics._launch(key, launches)  # records the graph if not yet recorded
+            physics.graphs.launch(key, launches)  # records the graph if not yet recorded
             with LaunchCount() as counter:
                 launches()
             result["warp_launches"][name] = counter.count
             sync()
             start = time.perf_counter()
             for _ in range(repeats):
-                physics._launch(key, launches)
+                physics.graphs.launch(key, launches)
             sync()
             result["ms"][name] = 1e3 * (time.perf_counter() - start) / repeats
     niter = torch.as_tensor(d.solver_niter.numpy()).double()
@@ -183,6 +184,18 @@ def step_breakdown(device: str, n: int, repeats: int) -> dict[str, Any]:
     sync()
     result["ms"]["face_step"] = 1e3 * (time.perf_counter() - start) / repeats
     result["torch_ops"] = {"face_step": torch_ops(lambda: face.step(actions))}
+    if device.startswith("cuda"):  # the same step replayed from one CUDA graph
+        face.step_graph = True
+        for _ in range(face.reset_depth + 2):  # records the graph, past a top-up
+            face.step(actions)
+        sync()
+        start = time.perf_counter()
+        for _ in range(repeats):
+            face.step(actions)
+        sync()
+        result["ms"]["face_step_graphed"] = 1e3 * (time.perf_counter() - start) / repeats
+        result["torch_ops"]["face_step_graphed"] = torch_ops(lambda: face.step(actions))
+        face.step_graph = False
 
     collector = Collector(TorchVectorEnv(env, reset_depth=face.reset_depth))
     obs_dim = env.single_observation_space.shape[0]
@@ -220,7 +233,7 @@ def frame_skip_floor(device: str, sizes: list[int], repeats: int) -> dict[str, f
         for _ in range(face.reset_depth + 2):
             face.step(zeros)
         physics = env.physics
-        graph = physics._graphs.get(("step", env.task.frame_skip, physics.num_sims))
+        graph = physics.graphs.recorded.get(("step", env.task.frame_skip, physics.num_sims))
         with physics._on_torch_stream():
             sync()
             start = time.perf_counter()

@@ -66,10 +66,10 @@ def main() -> None:
     low, high = env.single_action_space.low, env.single_action_space.high
     actions = rng.uniform(low, high, (n, low.size))
     rows = [("env.step, numpy face", timed(lambda: env.step(actions), reps, sync))]
-    physics.graphs, saved = False, physics._graphs
-    physics._graphs = {}
+    graphs = physics.graphs
+    graphs.enabled, saved, graphs.recorded = False, graphs.recorded, {}
     rows.append(("env.step, numpy face, graphs off", timed(lambda: env.step(actions), reps, sync)))
-    physics.graphs, physics._graphs = True, saved
+    graphs.enabled, graphs.recorded = True, saved
 
     face_env = LocomotionVectorEnv(
         "Walker2d-v5", n, autoreset_mode="SameStep", backend="warp", device=args.device

@@ -123,3 +123,38 @@ def test_a_narrowed_evaluation_equals_a_wide_one_on_cuda(monkeypatch) -> None:
     np.testing.assert_allclose(narrowed.true_objective, wide.true_objective, rtol=1e-6)
     np.testing.assert_allclose(narrowed.measures, wide.measures, rtol=1e-6)
     assert narrowed_steps < wide_steps
+
+
+def test_a_training_step_replayed_from_a_cuda_graph_changes_no_bit(monkeypatch) -> None:
+    """The device face's training step recorded in one CUDA graph (``StepGraph``).
+
+    Episodes of 12 steps make the autoresets and the reset-queue top-ups (every 16 steps,
+    outside the graph) part of the 40 steps compared.
+    """
+    from qdil.envs.vector import LocomotionVectorEnv
+    from qdil.rl.collect import Collector
+    from qdil.rl.networks import VectorizedActor
+
+    def rollout(graphed: bool) -> tuple[dict, LocomotionVectorEnv, TorchVectorEnv]:
+        monkeypatch.setattr(TorchVectorEnv, "step_graph", graphed)
+        env = LocomotionVectorEnv(
+            "Walker2d-v5", 48, max_episode_steps=12, autoreset_mode="SameStep",
+            backend="warp", device="cuda",
+        )  # fmt: skip
+        face = TorchVectorEnv(env)
+        collector = Collector(face)
+        actor = VectorizedActor(3, 17, 6).to("cuda")
+        stats = RunningMeanStd(3, (17,), device="cuda")
+        generator = torch.Generator(device="cuda").manual_seed(3)
+        collector.start(seed=4)
+        data, extras = collector.collect(actor, stats, 40, generator, update_stats=True)
+        fields = {**vars(data), **vars(extras)}
+        return {k: t.cpu() for k, t in fields.items() if torch.is_tensor(t)}, env, face
+
+    eager, eager_env, _ = rollout(False)
+    graphed, graphed_env, face = rollout(True)
+    assert face._graph is not None and face._graph._graph is not None  # replayed
+    assert eager.keys() == graphed.keys()
+    for key in eager:
+        torch.testing.assert_close(graphed[key], eager[key], rtol=0, atol=0, msg=key)
+    assert graphed_env.physics.world_steps == eager_env.physics.world_steps == 40 * 48

@@ -210,7 +210,7 @@ def test_graph_replays_equal_launches_from_python(mode: str, device: str) -> Non
     """
     make = dict(num_envs=NUM, max_episode_steps=4, autoreset_mode=mode, backend="warp")
     launched = LocomotionVectorEnv("Walker2d-v5", device=device, **make)
-    launched.physics.graphs = False
+    launched.physics.graphs.enabled = False
     replayed = LocomotionVectorEnv("Walker2d-v5", device=device, **make)
     first = [launched.reset(seed=5), replayed.reset(seed=5)]
     np.testing.assert_array_equal(first[0][0], first[1][0])
@@ -229,6 +229,7 @@ def test_graph_replays_equal_launches_from_python(mode: str, device: str) -> Non
             if not alive.any():
                 launched.reset(seed=6 + t), replayed.reset(seed=6 + t)
                 alive[:] = True
-    assert launched.physics._graphs == {}
-    recorded = {key[0] for key, graph in replayed.physics._graphs.items() if graph is not None}
+    assert launched.physics.graphs.recorded == {}
+    graphs = replayed.physics.graphs.recorded
+    recorded = {key[0] for key, graph in graphs.items() if graph is not None}
     assert recorded >= {"step", "sensors", "reset"}

@@ -166,3 +166,24 @@ def test_groups_played_side_by_side_equal_their_own_evaluations() -> None:
         assert a.env_steps == b.env_steps
         for field in ("objective", "true_objective", "measures", "lengths", "true_std"):
             np.testing.assert_array_equal(getattr(a, field), getattr(b, field), err_msg=field)
+
+
+@pytest.mark.parametrize("mode", ["SameStep", "Disabled"])
+def test_what_the_face_hands_out_is_not_changed_by_later_steps(mode: str) -> None:
+    """The face keeps its state in tensors it updates in place (so that a CUDA graph can
+    replay its step); what ``reset``, ``step`` and ``episode_statistics`` return are
+    copies, which callers may keep (the collector stacks a rollout's steps at its end)."""
+    face = TorchVectorEnv(_env(mode), reset_depth=3)
+    obs, _ = face.reset(seed=3)
+    kept = {"reset obs": obs}
+    actions = torch.full((NUM, 6), 0.7)
+    step = face.step(actions)
+    kept |= {f"step {name}": tensor for name, tensor in step._asdict().items()}
+    kept |= dict(zip(["returns", "lengths"], face.episode_statistics()[:2], strict=True))
+    saved = {name: tensor.clone() for name, tensor in kept.items()}
+    for _ in range(HORIZON + 2):  # past an episode end: resets rewrite the state too
+        face.step(-actions)
+    if mode == "Disabled":
+        face.reset(seed=4)
+    for name, tensor in kept.items():
+        torch.testing.assert_close(tensor, saved[name], rtol=0, atol=0, msg=name)

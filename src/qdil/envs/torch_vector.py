@@ -18,6 +18,7 @@ import torch
 from gymnasium.vector import AutoresetMode
 
 from qdil.devices import DEVICE_BACKENDS
+from qdil.envs.step_graph import StepGraph
 from qdil.envs.torch_step import TorchStep
 from qdil.envs.vector import LocomotionVectorEnv
 
@@ -41,6 +42,9 @@ class TorchVectorEnv:
 
     side_by_side = True
     sync_every = 16
+    step_graph = False
+    """Record a training step (autoreset on, CUDA) in one CUDA graph and replay it
+    (:class:`~qdil.envs.step_graph.StepGraph`); off until a GPU check has measured it."""
 
     def __init__(self, env: LocomotionVectorEnv, reset_depth: int = 16) -> None:
         if env.backend not in DEVICE_BACKENDS:
@@ -74,6 +78,7 @@ class TorchVectorEnv:
         self._used = torch.zeros(n, dtype=torch.int64, **on)  # states taken, per sim
         self._drawn = np.zeros(n, dtype=np.int64)  # states queued so far, per sim
         self._since_top_up = 0
+        self._graph: StepGraph | None = None
 
     # ----------------------------------------------------------------- helpers
     def _arrays(self) -> dict[str, torch.Tensor]:
@@ -119,16 +124,16 @@ class TorchVectorEnv:
         they are what the step that ended its episode reported.
         """
         length = self._elapsed.clamp(min=1)
-        return self._return, self._elapsed, self._contact_sum / length[:, None]
+        return self._return.clone(), self._elapsed.clone(), self._contact_sum / length[:, None]
 
     def _start_episodes(self, mask: torch.Tensor) -> None:
         """Zero the episode statistics where ``mask`` (N,) holds, after a physics reset."""
         position = self.task.position(self._arrays())
         wide = mask if position.dim() == 1 else mask[:, None]
-        self._position = torch.where(wide, position, self._position)
-        self._elapsed = torch.where(mask, 0, self._elapsed)
-        self._return = torch.where(mask, 0.0, self._return)
-        self._contact_sum = torch.where(mask[:, None], 0.0, self._contact_sum)
+        self._position.copy_(torch.where(wide, position, self._position))
+        self._elapsed.masked_fill_(mask, 0)
+        self._return.masked_fill_(mask, 0.0)
+        self._contact_sum.masked_fill_(mask[:, None], 0.0)
 
     # --------------------------------------------------------------------- API
     def reset(
@@ -150,12 +155,13 @@ class TorchVectorEnv:
         self.physics.reset(ids, qpos, qvel)
         mask_t = torch.from_numpy(mask).to(self.device)
         self._start_episodes(mask_t)
-        self._obs = torch.where(mask_t[:, None], self.task.observation(self._arrays()), self._obs)
+        observed = self.task.observation(self._arrays())
+        self._obs.copy_(torch.where(mask_t[:, None], observed, self._obs))
         if self.autoreset:
             self._used.zero_()
             self._drawn[:] = 0
             self._top_up()
-        return self._obs, self._contacts()
+        return self._obs.clone(), self._contacts()
 
     def narrow(self, mask: torch.Tensor) -> None:
         """Simulate only the sub-environments in the (N,) bool ``mask`` until the next reset.
@@ -184,6 +190,17 @@ class TorchVectorEnv:
         if self.autoreset and self._since_top_up == self.reset_depth:
             self._top_up()
         self._since_top_up += 1
+        if not (self.step_graph and self.autoreset and self.device.type == "cuda"):
+            return self._advance(actions, mask)
+        if self._graph is None:
+            self._graph = StepGraph(self._advance, actions, self.physics.graphs)
+        world_steps = self.physics.world_steps
+        result = self._graph(actions)
+        self.physics.world_steps = world_steps + self.num_envs  # a replay runs no Python
+        return result
+
+    def _advance(self, actions: torch.Tensor, mask: torch.Tensor | None = None) -> TorchStep:
+        """:meth:`step` after the top-up: on the device only, the state updated in place."""
         stepping = torch.ones(self.num_envs, dtype=torch.bool, device=self.device)
         if mask is not None:
             stepping = mask
@@ -194,18 +211,18 @@ class TorchVectorEnv:
         position = task.position(x)
         velocity = (position - self._position) / task.dt
         wide = stepping if position.dim() == 1 else stepping[:, None]
-        self._position = torch.where(wide, position, self._position)
+        self._position.copy_(torch.where(wide, position, self._position))
         reward, _ = task.reward(velocity, actions, x)
         reward = torch.where(stepping, reward.to(torch.float64), 0.0)
         terminated = task.terminated(x) & stepping
-        self._elapsed = self._elapsed + stepping
+        self._elapsed.add_(stepping)
         truncated = torch.zeros_like(terminated)
         if self.env.max_episode_steps is not None:
             truncated = (self._elapsed >= self.env.max_episode_steps) & stepping
         contacts = self._contacts()
         obs = task.observation(x)
-        self._return = self._return + reward
-        self._contact_sum = self._contact_sum + torch.where(stepping[:, None], contacts, 0.0)
+        self._return.add_(reward)
+        self._contact_sum.add_(torch.where(stepping[:, None], contacts, 0.0))
         done = terminated | truncated
         length = self._elapsed.clamp(min=1)
         episode_return = torch.where(done, self._return, 0.0)
@@ -217,11 +234,11 @@ class TorchVectorEnv:
             self.physics.reset_where(
                 done, self._queue_qpos[self._rows, slot], self._queue_qvel[self._rows, slot]
             )
-            self._used = self._used + done
+            self._used.add_(done)
             self._start_episodes(done)
             obs = torch.where(done[:, None], task.observation(self._arrays()), obs)
             contacts = torch.where(done[:, None], self._contacts(), contacts)
-        self._obs = obs
+        self._obs.copy_(obs)
         return TorchStep(
             obs=obs,
             final_obs=final_obs,

@@ -29,8 +29,6 @@ sensors added by :func:`~qdil.envs.physics.add_contact_sensors`).
 
 from __future__ import annotations
 
-import contextlib
-from collections.abc import Callable
 from typing import Any
 
 import mujoco
@@ -39,6 +37,7 @@ import torch
 from typing_extensions import override
 
 from qdil.envs.physics_base import Export, PhysicsBatch, reset_ids
+from qdil.envs.warp_graphs import WarpGraphs
 from qdil.envs.warp_startup import import_warp
 from qdil.envs.warp_worlds import Worlds, copy_states
 
@@ -67,6 +66,7 @@ class WarpBatch(PhysicsBatch):
         torch_device: ``device``.
         world_steps: env steps simulated so far, summed over the worlds each one advanced
             (narrowed worlds count once each; the cost of physics on a device).
+        graphs: the :class:`~qdil.envs.warp_graphs.WarpGraphs` of the launch sequences.
 
     ``exported`` and ``sensordata`` are host copies of :attr:`torch_exported` and
     :attr:`torch_sensordata`, made by :meth:`step` and :meth:`reset`.
@@ -117,12 +117,7 @@ class WarpBatch(PhysicsBatch):
         self._held = num_sims  # worlds held by _worlds; narrowed, the rest pad its batch
         self._narrowed: dict[int, Worlds] = {}  # smaller batches by size, made when first used
         self.world_steps = 0
-        self.graphs = graphs
-        self._graphs: dict[tuple, Any] = {}  # None: launched from Python
-        # a CUDA graph cannot be recorded on torch's legacy default stream: record on one
-        # of Warp's and replay on torch's (the CPU device records without a stream)
-        on_gpu = self.torch_device.type == "cuda"
-        self._capture_stream = self.warp.Stream(self.warp_device) if on_gpu and graphs else None
+        self.graphs = WarpGraphs(self.warp, self.warp_device, graphs)
 
         for field, _, _ in self._bounds:
             if not hasattr(self.wdata, field):
@@ -141,6 +136,8 @@ class WarpBatch(PhysicsBatch):
         """
         if self.torch_device.type != "cuda":
             return self.warp.ScopedDevice(self.warp_device)
+        if self.graphs.outer_stream is not None:  # recording: torch's capture is already ordered
+            return self.warp.ScopedStream(self.graphs.outer_stream, sync_enter=False)
         stream = torch.cuda.current_stream(self.torch_device)
         return self.warp.ScopedStream(self.warp.stream_from_torch(stream))
 
@@ -197,13 +194,13 @@ class WarpBatch(PhysicsBatch):
                 mjw.get_state(self.wmodel, worlds.data, worlds.saved, self._state)
             worlds.ctrl.copy_(ctrl)
             key = (worlds.size,)
-            self._launch(("step", nstep, *key), lambda: self._substeps(nstep, worlds.data))
+            self.graphs.launch(("step", nstep, *key), lambda: self._substeps(nstep, worlds.data))
             if active is not None:
                 mjw.set_state(self.wmodel, worlds.data, worlds.saved, self._state, worlds.keep)
             # exports read the post-step data (cfrc_ext, ...) before collision overwrites it
             exported = torch.cat([worlds.field(warp, f)[:, a:b] for f, a, b in self._bounds], dim=1)
             if self.model.nsensordata:
-                self._launch(("sensors", *key), lambda: self._sensor_pass(worlds.data))
+                self.graphs.launch(("sensors", *key), lambda: self._sensor_pass(worlds.data))
             sensors = worlds.field(warp, "sensordata")
             if rows is None:
                 self._store_where(active, exported, sensors)
@@ -301,40 +298,6 @@ class WarpBatch(PhysicsBatch):
         mjw.sensor_vel(m, d)
         mjw.fwd_actuation(m, d)
 
-    def _launch(self, key: tuple, launches: Callable[[], None]) -> None:
-        """Run ``launches`` (Warp launches on fixed arrays only), from a graph after the first.
-
-        The first call launches them one by one (Warp compiles and loads their modules) and
-        records them in a graph without running them again; later calls replay the graph on
-        the current stream (torch's, see :meth:`_on_torch_stream`). Python's cost of a
-        MuJoCo Warp step is hundreds of launches; a replay is one.
-        """
-        graph = self._graphs.get(key)
-        if graph is not None:
-            self.warp.capture_launch(graph)
-            return
-        launches()
-        if not self.graphs or key in self._graphs:  # a None entry: it could not be recorded
-            return
-        try:
-            with self._recording_stream():
-                capture = self.warp.ScopedCapture(device=self.warp_device)
-                with capture:
-                    launches()
-            self._graphs[key] = capture.graph
-        except RuntimeError:  # a launch that cannot be recorded: launch it from Python
-            self._graphs[key] = None
-
-    def _recording_stream(self) -> Any:
-        """A context whose Warp launches go to the stream graphs are recorded on.
-
-        On a GPU that is a stream of Warp's own that first waits for torch's; the CPU
-        device records without a stream.
-        """
-        if self._capture_stream is None:
-            return contextlib.nullcontext()
-        return self.warp.ScopedStream(self._capture_stream)
-
     def _store_where(
         self, rows: torch.Tensor | None, exported: torch.Tensor, sensors: torch.Tensor
     ) -> None:
@@ -382,7 +345,7 @@ class WarpBatch(PhysicsBatch):
         column = mask[:, None]
         with self._on_torch_stream():
             warp.to_torch(self._reset_mask).copy_(mask)
-            self._launch(
+            self.graphs.launch(
                 ("reset",), lambda: mjw.reset_data(self.wmodel, self.wdata, reset=self._reset_mask)
             )
             # MuJoCo's mj_resetData zeros what only rnePostConstraint computes (forward does
@@ -394,6 +357,6 @@ class WarpBatch(PhysicsBatch):
             self._qvel.copy_(torch.where(column, qvel.to(torch.float32), self._qvel))
             # the reset worlds' observed quantities; the other worlds' are recomputed from
             # their own states, and the next step recomputes everything anyway
-            self._launch(("observed",), self._observed_stages)
+            self.graphs.launch(("observed",), self._observed_stages)
             exported = torch.cat([self._tensor(f)[:, a:b] for f, a, b in self._bounds], dim=1)
             self._store_where(mask, exported, self._tensor("sensordata"))
