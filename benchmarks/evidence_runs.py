@@ -11,8 +11,11 @@ takes the next. Start one slot per core, each in its own session group::
     python benchmarks/evidence_runs.py status
 
 A killed slot leaves its run at its last checkpoint (every 10 iterations); the next slot
-that takes the run continues it bit for bit. A run whose record a report keeps under
-``docs/reports/evidence-<task>/runs/`` is done, on any machine::
+that takes the run continues it bit for bit. Humanoid's expert runs alone, on both cores:
+the slot that takes it waits for the other slots' runs to end, and they wait while it
+runs. Once it is re-scored, that slot makes the four demonstrations (``qdil demos``, the
+paper's pipeline) that Humanoid's WQDIL and GAIL runs wait for. A run whose record a
+report keeps under ``docs/reports/evidence-<task>/runs/`` is done, on any machine::
 
     qdil report runs/evidence/halfcheetah_* docs/reports/evidence-halfcheetah/runs \
         --out docs/reports/evidence-halfcheetah --force --videos 0
@@ -29,6 +32,7 @@ import json
 import os
 import subprocess
 import sys
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -37,6 +41,8 @@ OUT = Path("runs") / "evidence"
 REPORTS = ROOT / "docs" / "reports"
 EPISODES = {"HalfCheetah-v5": 12, "Walker2d-v5": 5, "Humanoid-v5": 5}
 """Re-scoring episodes per elite (the protocol's rule for raising them: its page)."""
+WAIT = 120.0
+"""Seconds a slot waits before it looks again for a run it may start."""
 
 
 @dataclass(frozen=True)
@@ -50,6 +56,15 @@ class Planned:
     numba_threads: int | None = None
     """``NUMBA_NUM_THREADS`` of the run's processes (``None``: numba's default, every core).
     At commit e168ef1 it also sets torch's thread count (the protocol's page says why)."""
+    threads: int = 1
+    """Physics threads (``--env.num_threads``, ``qdil eval --num-threads``)."""
+    alone: bool = False
+    """Runs with no other run beside it (it has every core)."""
+    demos: str | None = None
+    """The demonstration file the run imitates (under ``OUT``): it waits until it exists."""
+    makes_demos: str | None = None
+    """The demonstration file ``qdil demos`` makes from this run (under ``OUT``) once it is
+    re-scored."""
 
     @property
     def name(self) -> str:
@@ -71,10 +86,25 @@ def _runs(
     ]
 
 
+HUMANOID_DEMOS = "humanoid.npz"
 # the order is the protocol's: HalfCheetah, then Walker2d; Humanoid follows its expert
-QUEUE = _runs("HalfCheetah-v5", "halfcheetah", ("mcwae", "gail", "ppga"), range(3), 50) + _runs(
-    "Walker2d-v5", "walker", ("mcwae", "gail", "ppga"), range(3, 5), 120, numba_threads=1
-)
+QUEUE = (
+    _runs("HalfCheetah-v5", "halfcheetah", ("mcwae", "gail", "ppga"), range(3), 50)
+    + _runs("Walker2d-v5", "walker", ("mcwae", "gail", "ppga"), range(3, 5), 120, numba_threads=1)
+    + [
+        Planned(
+            "Humanoid-v5", "recipes/humanoid_ppga.yaml", 0, 100, threads=2, alone=True,
+            makes_demos=HUMANOID_DEMOS,
+        ),
+        *(
+            Planned(
+                "Humanoid-v5", f"recipes/humanoid_{method}.yaml", 0, 100, numba_threads=1,
+                demos=HUMANOID_DEMOS,
+            )
+            for method in ("mcwae", "gail")
+        ),
+    ]
+)  # fmt: skip
 
 
 def _record(run: Planned) -> Path:
@@ -121,13 +151,31 @@ def _alive(pid: int) -> bool:
     return True
 
 
+def _holder(run: Planned) -> int | None:
+    """The live process that holds ``run``'s lock, if any."""
+    lock = OUT / f"{run.name}.lock"
+    text = lock.read_text().strip() if lock.exists() else ""
+    return int(text) if text.isdigit() and _alive(int(text)) else None
+
+
+def _others_running() -> list[Planned]:
+    """Runs that another live slot holds."""
+    return [r for r in QUEUE if _holder(r) not in (None, os.getpid())]
+
+
+def ready(run: Planned) -> bool:
+    """Whether ``run`` may start now: its demonstrations exist, and no run that must run
+    alone is held by another slot."""
+    if run.demos is not None and not (OUT / run.demos).is_file():
+        return False
+    return not any(other.alone for other in _others_running())
+
+
 def take(run: Planned) -> bool:
     """Claim ``run`` for this process unless a live slot holds it."""
     lock = OUT / f"{run.name}.lock"
-    if lock.exists() and lock.read_text().strip().isdigit():
-        pid = int(lock.read_text())
-        if pid != os.getpid() and _alive(pid):
-            return False
+    if _holder(run) not in (None, os.getpid()):
+        return False
     lock.write_text(str(os.getpid()))
     return lock.read_text() == str(os.getpid())  # a slot that wrote at the same time loses
 
@@ -142,7 +190,9 @@ def work(run: Planned) -> None:
         command = ["fit", str(ROOT / run.recipe), "--seed", str(run.seed)]
         command += ["--qd.iterations", str(run.iterations), "--name", run.name]
         command += ["--logging.root", str(OUT)]
-    command += ["--env.num_threads", "1", "--logging.checkpoint_every", "10"]
+        if run.demos is not None:
+            command += ["--demos.path", str((OUT / run.demos).resolve())]
+    command += ["--env.num_threads", str(run.threads), "--logging.checkpoint_every", "10"]
     command += ["--logging.wandb", "disabled", "--logging.progress", "false"]
     # also at the budget: the resume writes the budget into config.yaml (a run begun with
     # another target stops at its checkpoint there; nothing else depends on the target)
@@ -153,9 +203,13 @@ def work(run: Planned) -> None:
     print(f"{prefix}qdil", " ".join(command), f"# {logged} iterations logged", flush=True)
     subprocess.run([sys.executable, "-m", "qdil.cli", *command], check=True, env=env)
     episodes = str(EPISODES[run.task])
-    evaluate = ["eval", str(folder), "--episodes", episodes, "--num-threads", "1"]
+    evaluate = ["eval", str(folder), "--episodes", episodes, "--num-threads", str(run.threads)]
     print(f"{prefix}qdil", " ".join(evaluate), flush=True)
     subprocess.run([sys.executable, "-m", "qdil.cli", *evaluate], check=True, env=env)
+    if run.makes_demos is not None and not (OUT / run.makes_demos).is_file():
+        demos = ["demos", str(folder), "--out", str(OUT / run.makes_demos)]
+        print(f"{prefix}qdil", " ".join(demos), flush=True)
+        subprocess.run([sys.executable, "-m", "qdil.cli", *demos], check=True, env=env)
 
 
 def main() -> None:
@@ -173,12 +227,18 @@ def main() -> None:
             print(f"{run.name:34s} {logged:4d}/{run.iterations} {state}")
         return
     while True:
-        todo = [run for run in QUEUE if not progress(run)[1]]
-        todo.sort(key=_order)
-        mine = next((run for run in todo if take(run)), None)
+        todo = sorted((run for run in QUEUE if not progress(run)[1]), key=_order)
+        mine = next((run for run in todo if ready(run) and take(run)), None)
         if mine is None:
-            print("nothing left to take", flush=True)
-            return
+            waiting = [run.name for run in todo if _holder(run) is None]
+            if not waiting:
+                print("nothing left to take", flush=True)
+                return
+            print(f"waiting for demonstrations or a run alone: {waiting}", flush=True)
+            time.sleep(WAIT)
+            continue
+        while mine.alone and _others_running():  # the other slots' runs end first
+            time.sleep(WAIT)
         work(mine)
         (OUT / f"{mine.name}.lock").unlink(missing_ok=True)
         if args.once:

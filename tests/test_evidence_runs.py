@@ -39,6 +39,12 @@ def test_the_queue_is_the_protocols(runner) -> None:
     # torch's thread count at e168ef1 follows NUMBA_NUM_THREADS: 1 for Walker2d's runs
     assert {r.numba_threads for r in runner.QUEUE if r.task == "Walker2d-v5"} == {1}
     assert {r.numba_threads for r in runner.QUEUE if r.task == "HalfCheetah-v5"} == {None}
+    # Humanoid: the expert alone on both cores, then WQDIL and GAIL from its demonstrations
+    expert, *imitators = [r for r in runner.QUEUE if r.task == "Humanoid-v5"]
+    assert expert.recipe.endswith("humanoid_ppga.yaml") and expert.alone and expert.threads == 2
+    assert sorted(Path(r.recipe).stem for r in imitators) == ["humanoid_gail", "humanoid_mcwae"]
+    assert {r.demos for r in imitators} == {expert.makes_demos} != {None}
+    assert {r.iterations for r in (expert, *imitators)} == {100}
 
 
 def test_a_run_held_by_a_live_slot_is_not_taken(runner) -> None:
@@ -67,3 +73,39 @@ def test_each_run_gets_its_thread_setting(runner, monkeypatch, walker: bool) -> 
     for env in (fit_env, eval_env):
         expected = "1" if walker else os.environ.get("NUMBA_NUM_THREADS")
         assert env.get("NUMBA_NUM_THREADS") == expected
+
+
+def test_imitation_waits_for_its_demonstrations_and_every_run_for_one_alone(runner) -> None:
+    expert, wqdil, _ = [r for r in runner.QUEUE if r.task == "Humanoid-v5"]
+    walker = next(r for r in runner.QUEUE if r.task == "Walker2d-v5")
+    assert runner.ready(expert) and runner.ready(walker) and not runner.ready(wqdil)
+    (runner.OUT / expert.makes_demos).write_bytes(b"")
+    assert runner.ready(wqdil)
+    with subprocess.Popen(["sleep", "30"]) as holder:  # another slot runs the expert
+        (runner.OUT / f"{expert.name}.lock").write_text(str(holder.pid))
+        assert not runner.ready(walker) and not runner.ready(wqdil)
+        holder.kill()
+    assert runner.ready(walker)  # its slot is gone
+
+
+def test_the_expert_makes_the_demonstrations_the_imitators_read(runner, monkeypatch) -> None:
+    calls = []
+    monkeypatch.setattr(
+        runner.subprocess, "run", lambda command, check, env: calls.append(command[3:])
+    )
+    expert, wqdil, _ = [r for r in runner.QUEUE if r.task == "Humanoid-v5"]
+    runner.work(expert)
+    fit, evaluate, demos = calls
+    assert fit[fit.index("--env.num_threads") + 1] == "2"
+    assert evaluate[evaluate.index("--num-threads") + 1] == "2"
+    assert demos == [
+        "demos",
+        str(runner.OUT / expert.name),
+        "--out",
+        str(runner.OUT / "humanoid.npz"),
+    ]
+    calls.clear()
+    runner.work(wqdil)
+    fit, _ = calls
+    path = fit[fit.index("--demos.path") + 1]
+    assert Path(path).is_absolute() and path.endswith("humanoid.npz")
