@@ -299,6 +299,8 @@ def markdown(result: dict[str, Any]) -> str:
         lines.append("")
     for step, error in result.get("errors", {}).items():
         lines.append(f"- {step} failed: {error}")
+    if result.get("not_run"):
+        lines.append(f"- not run, the budget spent: {', '.join(result['not_run'])}")
     return "\n".join(lines) + "\n"
 
 
@@ -359,6 +361,9 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     for name, step in steps.items():
         if name in args.skip.split(","):
             continue
+        if time.perf_counter() - start > args.budget:  # a step begun may run over, no more
+            result.setdefault("not_run", []).append(name)
+            continue
         began = time.perf_counter()
         try:
             result[name] = step()
@@ -369,6 +374,8 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         (args.out / "gpu_check.json").write_text(json.dumps(result, indent=1))
         (args.out / "gpu_check.md").write_text(markdown(result))
         print(f"{name}: {result['seconds'][name]:.1f} s", flush=True)
+    (args.out / "gpu_check.json").write_text(json.dumps(result, indent=1))
+    (args.out / "gpu_check.md").write_text(markdown(result))
     print(markdown(result))
     return result
 

@@ -78,3 +78,12 @@ def test_runs_side_by_side_cut_by_the_budget_keep_what_they_recorded(tmp_path: P
     assert side["iterations"] == [[], []]  # no iteration finishes in a second; no error either
     table = check.markdown({"command": "gpu_check", "side_by_side": side})
     assert "Stopped by the check's budget" in table
+
+
+def test_steps_left_when_the_budget_is_spent_are_listed(tmp_path: Path) -> None:
+    check = _gpu_check()
+    result = check.main(["--device", "cpu", "--quick", "--out", str(tmp_path), "--budget", "0"])
+    assert result["errors"] == {} and "seconds" not in result  # nothing began
+    assert result["not_run"][:3] == ["machine", "tests", "breakdown"]
+    assert "iterations_graphed" in result["not_run"]
+    assert "- not run, the budget spent: machine, tests" in (tmp_path / "gpu_check.md").read_text()
