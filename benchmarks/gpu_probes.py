@@ -146,7 +146,7 @@ def step_breakdown(device: str, n: int, repeats: int) -> dict[str, Any]:
     from qdil.rl.networks import VectorizedActor
     from qdil.rl.normalize import RunningMeanStd
 
-    sync = _sync(device)
+    sync, cuda = _sync(device), device.startswith("cuda")
     env, face = _walker_face(device, n)
     physics, task = env.physics, env.task
     generator = torch.Generator(device=face.device).manual_seed(0)
@@ -177,25 +177,20 @@ def step_breakdown(device: str, n: int, repeats: int) -> dict[str, Any]:
             result["ms"][name] = 1e3 * (time.perf_counter() - start) / repeats
     niter = torch.as_tensor(d.solver_niter.numpy()).double()
     result["solver_iterations"] = {"mean": float(niter.mean()), "max": float(niter.max())}
-    sync()
-    start = time.perf_counter()
-    for _ in range(repeats):
-        face.step(actions)
-    sync()
-    result["ms"]["face_step"] = 1e3 * (time.perf_counter() - start) / repeats
-    result["torch_ops"] = {"face_step": torch_ops(lambda: face.step(actions))}
-    if device.startswith("cuda"):  # the same step replayed from one CUDA graph
-        face.step_graph = True
-        for _ in range(face.reset_depth + 2):  # records the graph, past a top-up
+    result["torch_ops"] = {}
+    # the face's step as it is and, on CUDA, replayed from one CUDA graph
+    for name, graphed in [("face_step", False)] + [("face_step_graphed", True)] * cuda:
+        face.step_graph = graphed
+        for _ in range(face.reset_depth + 2):  # (re)records the graph, past a top-up
             face.step(actions)
         sync()
         start = time.perf_counter()
         for _ in range(repeats):
             face.step(actions)
         sync()
-        result["ms"]["face_step_graphed"] = 1e3 * (time.perf_counter() - start) / repeats
-        result["torch_ops"]["face_step_graphed"] = torch_ops(lambda: face.step(actions))
-        face.step_graph = False
+        result["ms"][name] = 1e3 * (time.perf_counter() - start) / repeats
+        result["torch_ops"][name] = torch_ops(lambda: face.step(actions))
+    face.step_graph = False
 
     collector = Collector(TorchVectorEnv(env, reset_depth=face.reset_depth))
     obs_dim = env.single_observation_space.shape[0]
