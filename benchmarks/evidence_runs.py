@@ -30,6 +30,7 @@ import argparse
 import csv
 import json
 import os
+import shutil
 import subprocess
 import sys
 import time
@@ -61,7 +62,8 @@ class Planned:
     alone: bool = False
     """Runs with no other run beside it (it has every core)."""
     demos: str | None = None
-    """The demonstration file the run imitates (under ``OUT``): it waits until it exists."""
+    """The demonstration file the run imitates (under ``OUT``, or kept by its task's report):
+    it waits until it exists."""
     makes_demos: str | None = None
     """The demonstration file ``qdil demos`` makes from this run (under ``OUT``) once it is
     re-scored."""
@@ -107,9 +109,18 @@ QUEUE = (
 )  # fmt: skip
 
 
+def _report(run: Planned) -> Path:
+    return REPORTS / f"evidence-{run.task.split('-v')[0].lower()}"
+
+
 def _record(run: Planned) -> Path:
-    task = run.task.split("-v")[0].lower()
-    return REPORTS / f"evidence-{task}" / "runs" / run.name / "eval.json"
+    return _report(run) / "runs" / run.name / "eval.json"
+
+
+def _demos(run: Planned) -> Path | None:
+    """The demonstrations ``run`` imitates: made here, or kept by its task's report."""
+    places = [OUT / run.demos, _report(run) / run.demos] if run.demos else []
+    return next((path.resolve() for path in places if path.is_file()), None)
 
 
 def recorded(run: Planned) -> bool:
@@ -166,7 +177,7 @@ def _others_running() -> list[Planned]:
 def ready(run: Planned) -> bool:
     """Whether ``run`` may start now: its demonstrations exist, and no run that must run
     alone is held by another slot."""
-    if run.demos is not None and not (OUT / run.demos).is_file():
+    if run.demos is not None and _demos(run) is None:
         return False
     return not any(other.alone for other in _others_running())
 
@@ -191,7 +202,7 @@ def work(run: Planned) -> None:
         command += ["--qd.iterations", str(run.iterations), "--name", run.name]
         command += ["--logging.root", str(OUT)]
         if run.demos is not None:
-            command += ["--demos.path", str((OUT / run.demos).resolve())]
+            command += ["--demos.path", str(_demos(run))]
     command += ["--env.num_threads", str(run.threads), "--logging.checkpoint_every", "10"]
     command += ["--logging.wandb", "disabled", "--logging.progress", "false"]
     # also at the budget: the resume writes the budget into config.yaml (a run begun with
@@ -210,6 +221,10 @@ def work(run: Planned) -> None:
         demos = ["demos", str(folder), "--out", str(OUT / run.makes_demos)]
         print(f"{prefix}qdil", " ".join(demos), flush=True)
         subprocess.run([sys.executable, "-m", "qdil.cli", *demos], check=True, env=env)
+        # kept beside the task's report too (to commit): the imitation runs need the same
+        # file on a machine that replaces this one
+        _report(run).mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(OUT / run.makes_demos, _report(run) / run.makes_demos)
 
 
 def main() -> None:

@@ -21,6 +21,7 @@ def runner(tmp_path: Path, monkeypatch):
     module = importlib.util.module_from_spec(spec)
     monkeypatch.setitem(sys.modules, "evidence_runs", module)  # its dataclass looks it up
     spec.loader.exec_module(module)
+    monkeypatch.setattr(module, "REPORTS", tmp_path / "reports")  # not the repository's
     monkeypatch.chdir(tmp_path)
     (tmp_path / module.OUT).mkdir(parents=True)
     return module
@@ -90,9 +91,13 @@ def test_imitation_waits_for_its_demonstrations_and_every_run_for_one_alone(runn
 
 def test_the_expert_makes_the_demonstrations_the_imitators_read(runner, monkeypatch) -> None:
     calls = []
-    monkeypatch.setattr(
-        runner.subprocess, "run", lambda command, check, env: calls.append(command[3:])
-    )
+
+    def run(command: list[str], check: bool, env: dict) -> None:
+        calls.append(command[3:])
+        if command[3] == "demos":  # what `qdil demos` writes
+            Path(command[command.index("--out") + 1]).write_bytes(b"demonstrations")
+
+    monkeypatch.setattr(runner.subprocess, "run", run)
     expert, wqdil, _ = [r for r in runner.QUEUE if r.task == "Humanoid-v5"]
     runner.work(expert)
     fit, evaluate, demos = calls
@@ -104,8 +109,17 @@ def test_the_expert_makes_the_demonstrations_the_imitators_read(runner, monkeypa
         "--out",
         str(runner.OUT / "humanoid.npz"),
     ]
+    # kept beside Humanoid's report as well, for a machine that replaces this one
+    kept = runner.REPORTS / "evidence-humanoid" / "humanoid.npz"
+    assert kept.read_bytes() == b"demonstrations"
     calls.clear()
     runner.work(wqdil)
     fit, _ = calls
     path = fit[fit.index("--demos.path") + 1]
-    assert Path(path).is_absolute() and path.endswith("humanoid.npz")
+    assert path == str((runner.OUT / "humanoid.npz").resolve())
+    (runner.OUT / "humanoid.npz").unlink()  # a new machine: only the report's copy is left
+    assert runner.ready(wqdil)
+    calls.clear()
+    runner.work(wqdil)
+    fit, _ = calls
+    assert fit[fit.index("--demos.path") + 1] == str(kept.resolve())
