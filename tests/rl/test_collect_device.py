@@ -187,3 +187,26 @@ def test_what_the_face_hands_out_is_not_changed_by_later_steps(mode: str) -> Non
         face.reset(seed=4)
     for name, tensor in kept.items():
         torch.testing.assert_close(tensor, saved[name], rtol=0, atol=0, msg=name)
+
+
+def test_a_training_step_changes_no_python_state() -> None:
+    """What a CUDA graph replays (``StepGraph``) is the step's kernels only: the step body
+    may write its tensors in place, but must not rebind an attribute of the face or the
+    physics (a replay would not), whatever episodes end in it. World-steps are counted
+    outside it."""
+    face = TorchVectorEnv(_env("SameStep"), reset_depth=3)
+    face.reset(seed=5)
+    actions = torch.full((NUM, 6), 0.9)
+    physics = face.physics
+
+    def state() -> dict[str, object]:
+        kept = {f"face.{k}": v for k, v in vars(face).items()}
+        kept |= {f"physics.{k}": v for k, v in vars(physics).items() if k != "world_steps"}
+        return {k: (id(v), v.data_ptr()) if torch.is_tensor(v) else id(v) for k, v in kept.items()}
+
+    before = state()
+    ended = 0
+    for t in range(HORIZON + 2):  # past the episodes' ends: the autoreset runs too
+        ended += int(face._advance(actions if t % 2 else -actions).done.sum())
+    assert ended > 0
+    assert state() == before
