@@ -358,6 +358,11 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
             args.device, overrides, args.runs, 2, args.budget - 45 - (time.perf_counter() - start)
         ),
     }
+
+    def save() -> None:  # after every step: a check cut short keeps what it measured
+        (args.out / "gpu_check.json").write_text(json.dumps(result, indent=1))
+        (args.out / "gpu_check.md").write_text(markdown(result))
+
     for name, step in steps.items():
         if name in args.skip.split(","):
             continue
@@ -371,11 +376,9 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
             result["errors"][name] = f"{type(error).__name__}: {error}"
             result.setdefault("tracebacks", {})[name] = traceback.format_exc()
         result.setdefault("seconds", {})[name] = time.perf_counter() - began
-        (args.out / "gpu_check.json").write_text(json.dumps(result, indent=1))
-        (args.out / "gpu_check.md").write_text(markdown(result))
+        save()
         print(f"{name}: {result['seconds'][name]:.1f} s", flush=True)
-    (args.out / "gpu_check.json").write_text(json.dumps(result, indent=1))
-    (args.out / "gpu_check.md").write_text(markdown(result))
+    save()
     print(markdown(result))
     return result
 

@@ -48,13 +48,16 @@ class WarpGraphs:
         records them in a graph without running them again; later calls replay the graph on
         the current stream (torch's, see ``WarpBatch._on_torch_stream``).
         """
-        graph = None if self.outer_stream is not None else self.recorded.get(key)
+        if self.outer_stream is not None:  # inside torch's capture: its graph takes them
+            launches()
+            return
+        graph = self.recorded.get(key)
         if graph is not None:
             self.warp.capture_launch(graph)
             return
         launches()
-        if self.outer_stream is not None or not self.enabled or key in self.recorded:
-            return  # a None entry: it could not be recorded
+        if not self.enabled or key in self.recorded:  # a None entry: it could not be recorded
+            return
         try:
             on_stream = self._stream is not None
             with self.warp.ScopedStream(self._stream) if on_stream else contextlib.nullcontext():
