@@ -17,6 +17,7 @@ from qdil.evaluation.profiles import archive_profile, method_profile, profile_le
 from qdil.evaluation.report import colour_range, format_pvalue, main_table, tukey_tests
 from qdil.evaluation.runs import RunResult, find_runs, group_runs, method_label
 from qdil.evaluation.stats import Summary, align_curves, format_mean_std, summarize, tukey
+from qdil.evaluation.tables import ratio_records, table_records
 
 
 def test_summarize_uses_the_sample_std() -> None:
@@ -122,6 +123,25 @@ def test_main_table_rows_and_single_seed_cells() -> None:
     assert gail[3] == "50.00 ± 0.00"
     assert gail[7] == "2.00e+06 (n=1)"
     assert rows[0][6] == "–"  # no true-reward run on Hopper
+
+
+def test_deployable_tables_and_ratios_use_the_runs_that_have_that_archive() -> None:
+    # seeds 0-1 predate the deployable archive (older checkpoints), seeds 2-3 have it
+    runs = [
+        fake_run("Walker2d-v5", m, 1e6 * (s + 1), s) for m in ("GAIL", "WQDIL") for s in range(4)
+    ]
+    for run in runs[2:4] + runs[6:8]:
+        run.deployable = {**run.metrics, "qd_score": run.metrics["qd_score"] / 2}
+    groups = group_runs(runs)
+    _, rows = main_table(groups, "deployable")
+    wqdil = next(row for row in rows if row[0] == "WQDIL")
+    assert wqdil[1] == "2" and wqdil[2] == f"1.75e+06 ± {statistics.stdev([1.5e6, 2e6]):.2e}"
+    record = next(r for r in table_records(groups, "deployable") if r["method"] == "WQDIL")
+    assert (record["n"], record["seeds"], record["qd_score_mean"]) == (2, "2 3", 1.75e6)
+    assert next(r for r in table_records(groups) if r["method"] == "WQDIL")["n"] == 4
+    ratios = {(r["archive"], r["qd_score"]): r for r in ratio_records(groups)}
+    assert ratios["deployable", "raw"]["value"] == pytest.approx(1.0)
+    assert ratios["deployable", "raw"]["n"] == "2/2" and ratios["true", "raw"]["n"] == "4/4"
 
 
 def test_duplicate_seeds_are_flagged() -> None:

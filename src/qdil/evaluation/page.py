@@ -139,8 +139,9 @@ def build_document(
             doc.text(
                 "Each cell keeps the policy with the best return under the run's own "
                 "objective (the learned reward, plus bonus): what a user without the true "
-                "reward gets. Scored like the table above, on the true return; `–` where "
-                "the runs have no deployable archive."
+                "reward gets. Scored like the table above, on the true return, over the runs "
+                "that have one (n counts them; a checkpoint made before the deployable archive "
+                "existed has none); `–` where none has."
             )
         ]
         blocks += [doc.table(*main_table(groups, "deployable"))]

@@ -50,6 +50,15 @@ def metric_values(
     return np.array([scale * metrics.get(key, math.nan) for metrics in found], dtype=np.float64)
 
 
+def scored(runs: Sequence[RunResult], archive: str = "true") -> list[RunResult]:
+    """The runs that have ``archive`` (``true`` or ``deployable``).
+
+    Every run has its true-keyed archive; a run whose checkpoint predates the deployable
+    archive has none, and is left out of that archive's means instead of making them NaN.
+    """
+    return [run for run in runs if archive == "true" or run.deployable]
+
+
 def _short(task: str) -> str:
     return task.split("-v")[0]
 
@@ -69,8 +78,8 @@ def main_table(groups: Groups, archive: str = "true") -> tuple[list[str], list[l
         archive: ``true`` (the paper's true-keyed archives) or ``deployable``.
 
     Returns:
-        Header and rows of text cells (``mean ± std`` over seeds; ``n`` has a ``*`` when the
-        group includes unfinished runs).
+        Header and rows of text cells (``mean ± std`` over the seeds that have ``archive``,
+        counted by ``n``; ``n`` has a ``*`` when the group includes unfinished runs).
     """
     columns = [m for m in TABLE_METRICS if m[0] != "qd_score_offset"]
     header = ["Method"]
@@ -81,7 +90,7 @@ def main_table(groups: Groups, archive: str = "true") -> tuple[list[str], list[l
     for method in methods:
         row = [method]
         for runs_by_method in groups.values():
-            runs = runs_by_method.get(method, [])
+            runs = scored(runs_by_method.get(method, []), archive)
             row.append(_count(runs))
             for key, _, style, scale in columns:
                 values = metric_values(runs, key, scale, archive)
@@ -118,11 +127,12 @@ def table_records(groups: Groups, archive: str = "true") -> list[dict[str, Any]]
 
     Args:
         groups: included runs by task and method.
-        archive: ``true`` or ``deployable`` (runs without one count as NaN).
+        archive: ``true`` or ``deployable`` (``n`` and ``seeds`` count the runs that have it).
     """
     records = []
     for task, runs_by_method in groups.items():
-        for method, runs in runs_by_method.items():
+        for method, group in runs_by_method.items():
+            runs = scored(group, archive)
             record: dict[str, Any] = {
                 "task": task,
                 "method": method,
@@ -166,10 +176,11 @@ def ratio_records(groups: Groups) -> list[dict[str, Any]]:
                 for reference in RATIO_REFERENCES:
                     if reference not in runs_by_method:
                         continue
-                    below = metric_values(runs_by_method[reference], key, 1.0, archive)
+                    reference_runs = scored(runs_by_method[reference], archive)
+                    below = metric_values(reference_runs, key, 1.0, archive)
                     for method, runs in runs_by_method.items():
-                        above = metric_values(runs, key, 1.0, archive)
-                        if method == reference or np.isnan(above).all() or np.isnan(below).all():
+                        above = metric_values(scored(runs, archive), key, 1.0, archive)
+                        if method == reference or not len(above) or not len(below):
                             continue
                         ratio = ratio_of_means(above, below)
                         records.append(
