@@ -8,7 +8,9 @@ H100 or H200)::
 measures, in steady state (kernels compiled and Warp graphs recorded before any clock runs):
 
 0. the GPU tests (``pytest -m gpu -n 0 tests/test_gpu.py tests/envs/test_warp_backend.py``),
-   first, so that a check cut short by its budget still says what is correct;
+   first, so that a check cut short by its budget still says what is correct; then how far
+   a training rollout and an evaluation land from themselves when played again (eagerly,
+   from a CUDA graph, narrowed or not): MuJoCo Warp on CUDA is not repeatable bit for bit;
 1. where one training env step's time goes at the paper's N = 3,000: each recorded Warp
    sequence (substeps, sensor pass, reset, the reset's observed stages of ``forward``, and
    the whole ``forward`` for comparison), the torch face's step (also replayed from one
@@ -64,6 +66,8 @@ from gpu_probes import (
     RECIPE,
     frame_skip_floor,
     machine,
+    repeatability,
+    repeatability_table,
     rollout_syncs,
     rollout_throughput,
     step_breakdown,
@@ -293,6 +297,8 @@ def markdown(result: dict[str, Any]) -> str:
         if side["timed_out"]:
             lines.append(f"\nStopped by the check's budget after {side['seconds']:.0f} s.")
         lines.append("")
+    if "repeatability" in result:
+        lines += repeatability_table(result["repeatability"])
     if "tests" in result:
         lines += ["| GPU test | result |", "|---|---|"]
         lines += [f"| `{name}` | {o} |" for name, o in result["tests"]["outcomes"].items()]
@@ -337,6 +343,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         "machine": lambda: machine(args.device),
         # first: what is correct matters more than what is fast when the budget runs out
         "tests": lambda: gpu_tests(min(240.0, args.budget - (time.perf_counter() - start))),
+        "repeatability": lambda: repeatability(args.device, args.quick),
         "breakdown": lambda: step_breakdown(
             args.device, 6 if args.quick else 3000, 3 if args.quick else 50
         ),
@@ -350,10 +357,10 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         "iterations_in_turns": lambda: qd_iterations(
             args.device, [*overrides, "--env.eval_envs", str(turns)], 2
         ),
-        # the same iterations with the ended evaluation episodes kept in the batch
-        "iterations_wide": lambda: qd_iterations(args.device, overrides, 2, narrow=False),
         # the same iterations with each training step replayed from one CUDA graph
         "iterations_graphed": lambda: qd_iterations(args.device, overrides, 2, graphed=True),
+        # the same iterations with the ended evaluation episodes kept in the batch
+        "iterations_wide": lambda: qd_iterations(args.device, overrides, 2, narrow=False),
         "side_by_side": lambda: runs_side_by_side(
             args.device, overrides, args.runs, 2, args.budget - 45 - (time.perf_counter() - start)
         ),

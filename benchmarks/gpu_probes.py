@@ -288,3 +288,90 @@ def rollout_syncs(device: str, overrides: list[str], steps: int | None) -> dict[
         "reset_depth": collector.env.reset_depth,
         "env_steps_per_second": n * steps / seconds,
     }
+
+
+def _largest_differences(a: dict[str, Any], b: dict[str, Any]) -> dict[str, float]:
+    """Largest absolute difference of each tensor field of two rollouts (NaN equal to NaN)."""
+    return {
+        key: float((a[key].double() - b[key].double()).abs().nan_to_num(0.0).max())
+        for key in a
+        if a[key].numel()
+    }
+
+
+def repeatability(device: str, quick: bool) -> dict[str, Any]:
+    """How far the same computation lands from itself: a run-to-run test of the engine.
+
+    The training rollout of ``tests/test_gpu.py`` (48 simulations, 12-step episodes, 40 steps)
+    played twice eagerly and once with each step replayed from a CUDA graph, and its
+    evaluation (3 policies, 32 episodes each, up to 60 steps) played twice narrowed to the
+    running episodes and twice not: the largest difference of every field between the pairs.
+    On Warp's CPU device all are 0; on CUDA MuJoCo Warp's atomics order contacts and sums
+    differently from run to run (docs/guides/gpu.md).
+    """
+    import numpy as np
+    import torch
+
+    from qdil.envs.torch_vector import TorchVectorEnv
+    from qdil.envs.vector import LocomotionVectorEnv
+    from qdil.rl.collect import Collector
+    from qdil.rl.episodes import EvaluationGroup, evaluate_groups
+    from qdil.rl.networks import VectorizedActor
+    from qdil.rl.normalize import RunningMeanStd
+
+    def rollout(graphed: bool) -> dict[str, Any]:
+        env = LocomotionVectorEnv(
+            "Walker2d-v5", 12 if quick else 48, max_episode_steps=12,
+            autoreset_mode="SameStep", backend="warp", device=device,
+        )  # fmt: skip
+        face = TorchVectorEnv(env)
+        face.step_graph = graphed
+        torch.manual_seed(0)
+        actor = VectorizedActor(3, 17, 6).to(device)
+        stats = RunningMeanStd(3, (17,), device=device)
+        generator = torch.Generator(device=device).manual_seed(3)
+        collector = Collector(face)
+        collector.start(seed=4)
+        data, extras = collector.collect(actor, stats, 40, generator, update_stats=True)
+        fields = {**vars(data), **vars(extras)}
+        return {k: t.cpu() for k, t in fields.items() if torch.is_tensor(t)}
+
+    actor = VectorizedActor(3, 17, 6)
+    solutions = np.stack([actor.initial_solution(17, 6, seed=s) for s in range(3)])
+    actor.set_solutions(solutions * np.array([3.0, 30.0, 10.0])[:, None])
+    actor, stats = actor.to(device), RunningMeanStd(3, (17,), device=device)
+
+    def evaluation(narrow: bool) -> dict[str, Any]:
+        env = LocomotionVectorEnv(
+            "Walker2d-v5", 12 if quick else 96, max_episode_steps=60,
+            autoreset_mode="Disabled", backend="warp", device=device,
+        )  # fmt: skip
+        face = TorchVectorEnv(env)
+        if not narrow:
+            face.narrow = lambda mask: None
+        generator = torch.Generator(device=device).manual_seed(2)
+        group = EvaluationGroup(actor, stats, 4 if quick else 32, 9, generator)
+        (scores,) = evaluate_groups(face, [group], sync_every=4)
+        fields = ("lengths", "true_objective", "measures")
+        return {key: torch.as_tensor(np.asarray(getattr(scores, key))) for key in fields}
+
+    eager = rollout(False)
+    narrowed, wide = evaluation(True), evaluation(False)
+    return {
+        "rollout_eager_vs_eager": _largest_differences(eager, rollout(False)),
+        "rollout_graphed_vs_eager": _largest_differences(rollout(True), eager),
+        "evaluation_narrowed_vs_narrowed": _largest_differences(narrowed, evaluation(True)),
+        "evaluation_wide_vs_wide": _largest_differences(wide, evaluation(False)),
+        "evaluation_narrowed_vs_wide": _largest_differences(narrowed, wide),
+    }
+
+
+def repeatability_table(pairs: dict[str, dict[str, float]]) -> list[str]:
+    """The Markdown lines of :func:`repeatability`'s largest differences, a row per pair."""
+    fields = ["obs", "rewards", "dones", "contacts", "lengths", "true_objective", "measures"]
+    lines = ["Largest difference between two plays of the same computation:", ""]
+    lines += ["| pair | " + " | ".join(fields) + " |", "|" + "---|" * (len(fields) + 1)]
+    for pair, diffs in pairs.items():
+        cells = [f"{diffs[f]:.2g}" if f in diffs else "" for f in fields]
+        lines.append(f"| {pair} | " + " | ".join(cells) + " |")
+    return [*lines, ""]

@@ -89,11 +89,14 @@ def test_a_rollout_does_not_sync_with_the_host_per_step(tmp_path: Path) -> None:
     assert len(syncs) <= steps // depth, [str(w.message) for w in syncs]
 
 
-def test_a_narrowed_evaluation_equals_a_wide_one_on_cuda(monkeypatch) -> None:
+def test_a_narrowed_evaluation_agrees_with_a_wide_one_on_cuda(monkeypatch) -> None:
     """Ended episodes leave the batch on the GPU too, and the scores stay.
 
-    On Warp's CPU device narrowing changes no bit (``tests/envs/test_warp_narrow.py``); here
-    the same evaluation is played with and without it on CUDA.
+    On Warp's CPU device narrowing changes no bit (``tests/envs/test_warp_narrow.py``). On
+    CUDA MuJoCo Warp is not repeatable bit for bit (its atomics order contacts and sums
+    differently from run to run), so the same evaluation played twice differs by itself:
+    returns by up to 1e-4 on an H200 (2026-11-27), narrowed or not, and once an episode by
+    two steps. The bounds below are ten times that.
     """
     import numpy as np
 
@@ -119,17 +122,21 @@ def test_a_narrowed_evaluation_equals_a_wide_one_on_cuda(monkeypatch) -> None:
     (narrowed,), narrowed_steps = evaluate()
     monkeypatch.setattr(TorchVectorEnv, "narrow", lambda self, mask: None)
     (wide,), wide_steps = evaluate()
-    np.testing.assert_array_equal(narrowed.lengths, wide.lengths)
-    np.testing.assert_allclose(narrowed.true_objective, wide.true_objective, rtol=1e-6)
-    np.testing.assert_allclose(narrowed.measures, wide.measures, rtol=1e-6)
+    # mean episode lengths of the 3 policies (32 episodes each); 0.0625 is 2 steps in all
+    np.testing.assert_allclose(narrowed.lengths, wide.lengths, rtol=0, atol=0.625)
+    np.testing.assert_allclose(narrowed.true_objective, wide.true_objective, rtol=0, atol=1e-3)
+    np.testing.assert_allclose(narrowed.measures, wide.measures, rtol=0, atol=0.02)
     assert narrowed_steps < wide_steps
 
 
-def test_a_training_step_replayed_from_a_cuda_graph_changes_no_bit(monkeypatch) -> None:
+def test_a_training_step_replayed_from_a_cuda_graph_agrees_with_the_eager_step(monkeypatch) -> None:
     """The device face's training step recorded in one CUDA graph (``StepGraph``).
 
     Episodes of 12 steps make the autoresets and the reset-queue top-ups (every 16 steps,
-    outside the graph) part of the 40 steps compared.
+    outside the graph) part of the 40 steps compared. MuJoCo Warp on CUDA is not repeatable
+    bit for bit: two eager rollouts differed by up to 8.3e-5 in the observations on an H200
+    (2026-11-27), the graphed one from an eager one by 7.8e-5. Every event (an episode's end,
+    a foot's contact) must be the same, and the values within ten times that spread.
     """
     from qdil.envs.vector import LocomotionVectorEnv
     from qdil.rl.collect import Collector
@@ -156,5 +163,7 @@ def test_a_training_step_replayed_from_a_cuda_graph_changes_no_bit(monkeypatch) 
     assert face._graph is not None and face._graph._graph is not None  # replayed
     assert eager.keys() == graphed.keys()
     for key in eager:
-        torch.testing.assert_close(graphed[key], eager[key], rtol=0, atol=0, msg=key)
+        exact = eager[key].dtype == torch.bool or key == "actions"  # events; noise alone
+        atol = 0.0 if exact else 1e-3
+        torch.testing.assert_close(graphed[key], eager[key], rtol=0, atol=atol, msg=key)
     assert graphed_env.physics.world_steps == eager_env.physics.world_steps == 40 * 48

@@ -48,6 +48,11 @@ def test_the_check_runs_every_step_on_the_cpu(tmp_path: Path, monkeypatch) -> No
     assert side["gpu_memory_mib_max"] is None  # no nvidia-smi here
     assert [[row["iteration"] for row in rows] for rows in side["iterations"]] == [[1, 2]] * 2
     assert all(row["iter_seconds"] > 0 for rows in side["iterations"] for row in rows)
+    # Warp's CPU device plays the same computation to the same bits, narrowed or not
+    pairs = saved["repeatability"]
+    assert len(pairs) == 5 and all(pairs.values())
+    assert {f: d for diffs in pairs.values() for f, d in diffs.items() if d != 0} == {}
+    assert "| evaluation_narrowed_vs_wide |" in (tmp_path / "out" / "gpu_check.md").read_text()
     # the GPU tests skip without CUDA, and the check says so rather than failing
     outcomes = saved["tests"]["outcomes"]
     assert outcomes and set(outcomes.values()) == {"skipped"}
@@ -60,7 +65,7 @@ def test_a_failed_step_is_reported_and_the_others_still_run(tmp_path: Path) -> N
     result = _gpu_check().main(
         [
             *("--device", "cpu", "--quick", "--out", str(tmp_path)),
-            "--skip=breakdown,floor,throughput,iterations_in_turns,iterations_wide,"
+            "--skip=repeatability,breakdown,floor,throughput,iterations_in_turns,iterations_wide,"
             "iterations_graphed,side_by_side,tests",
             "--set=--env.num_envs 5",  # not divisible by Walker2d's k + 1 = 3
         ]
@@ -84,6 +89,6 @@ def test_steps_left_when_the_budget_is_spent_are_listed(tmp_path: Path) -> None:
     check = _gpu_check()
     result = check.main(["--device", "cpu", "--quick", "--out", str(tmp_path), "--budget", "0"])
     assert result["errors"] == {} and "seconds" not in result  # nothing began
-    assert result["not_run"][:3] == ["machine", "tests", "breakdown"]
+    assert result["not_run"][:4] == ["machine", "tests", "repeatability", "breakdown"]
     assert "iterations_graphed" in result["not_run"]
     assert "- not run, the budget spent: machine, tests" in (tmp_path / "gpu_check.md").read_text()
