@@ -24,9 +24,9 @@ measures, in steady state (kernels compiled and Warp graphs recorded before any 
 4. two QD iterations of ``recipes/gpu/walker_mcwae.yaml`` through ``qdil fit``, with each
    phase's seconds from ``metrics.csv`` (the second iteration is the figure: the first
    records graphs and builds the reward model's optimiser state); the same without
-   narrowing an evaluation's batch to its running episodes (``WarpBatch.narrow``), the
-   baseline of narrowing; and the same with each training step replayed from one CUDA
-   graph (``TorchVectorEnv.step_graph``); when asked for (``--skip ''``), also with θ_μ
+   narrowing (``WarpBatch.narrow``), with each training step replayed from one CUDA graph
+   (``TorchVectorEnv.step_graph``) and on MuJoCo Warp's deterministic kernels
+   (``env.deterministic``); when asked for (``--skip ''``), also with θ_μ
    and its branches scored one after the other (``--env.eval_envs 3000``), the baseline of
    scoring them side by side;
 5. when asked for, the same two QD iterations as ``--runs`` separate ``qdil fit`` processes
@@ -261,6 +261,7 @@ def markdown(result: dict[str, Any]) -> str:
         ("iterations_in_turns", "in turns"),
         ("iterations_wide", "side by side, every simulation to the end (not narrowed)"),
         ("iterations_graphed", "as the first, each training step replayed from a CUDA graph"),
+        ("iterations_deterministic", "as the first, on MuJoCo Warp's deterministic kernels"),
     ):
         if key not in result:
             continue
@@ -359,6 +360,10 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         ),
         # the same iterations with each training step replayed from one CUDA graph
         "iterations_graphed": lambda: qd_iterations(args.device, overrides, 2, graphed=True),
+        # the same iterations on MuJoCo Warp's deterministic kernels: what repeatability costs
+        "iterations_deterministic": lambda: qd_iterations(
+            args.device, [*overrides, "--env.deterministic", "true"], 2
+        ),
         # the same iterations with the ended evaluation episodes kept in the batch
         "iterations_wide": lambda: qd_iterations(args.device, overrides, 2, narrow=False),
         "side_by_side": lambda: runs_side_by_side(

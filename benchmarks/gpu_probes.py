@@ -303,7 +303,8 @@ def repeatability(device: str, quick: bool) -> dict[str, Any]:
     """How far the same computation lands from itself: a run-to-run test of the engine.
 
     The training rollout of ``tests/test_gpu.py`` (48 simulations, 12-step episodes, 40 steps)
-    played twice eagerly and once with each step replayed from a CUDA graph, and its
+    played twice eagerly and once with each step replayed from a CUDA graph, with MuJoCo
+    Warp's default kernels and with its deterministic ones (``env.deterministic``), and its
     evaluation (3 policies, 32 episodes each, up to 60 steps) played twice narrowed to the
     running episodes and twice not: the largest difference of every field between the pairs.
     On Warp's CPU device all are 0; on CUDA MuJoCo Warp's atomics order contacts and sums
@@ -319,10 +320,11 @@ def repeatability(device: str, quick: bool) -> dict[str, Any]:
     from qdil.rl.networks import VectorizedActor
     from qdil.rl.normalize import RunningMeanStd
 
-    def rollout(graphed: bool) -> dict[str, Any]:
+    def rollout(graphed: bool, deterministic: bool = False) -> dict[str, Any]:
         env = LocomotionVectorEnv(
             "Walker2d-v5", 12 if quick else 48, max_episode_steps=12,
             autoreset_mode="SameStep", backend="warp", device=device,
+            deterministic=deterministic,
         )  # fmt: skip
         face = TorchVectorEnv(env)
         face.step_graph = graphed
@@ -355,11 +357,17 @@ def repeatability(device: str, quick: bool) -> dict[str, Any]:
         fields = ("lengths", "true_objective", "measures")
         return {key: torch.as_tensor(np.asarray(getattr(scores, key))) for key in fields}
 
-    eager = rollout(False)
+    eager, ordered = rollout(False), rollout(False, deterministic=True)
     narrowed, wide = evaluation(True), evaluation(False)
     return {
         "rollout_eager_vs_eager": _largest_differences(eager, rollout(False)),
         "rollout_graphed_vs_eager": _largest_differences(rollout(True), eager),
+        "rollout_deterministic_eager_vs_eager": _largest_differences(
+            ordered, rollout(False, deterministic=True)
+        ),
+        "rollout_deterministic_graphed_vs_eager": _largest_differences(
+            rollout(True, deterministic=True), ordered
+        ),
         "evaluation_narrowed_vs_narrowed": _largest_differences(narrowed, evaluation(True)),
         "evaluation_wide_vs_wide": _largest_differences(wide, evaluation(False)),
         "evaluation_narrowed_vs_wide": _largest_differences(narrowed, wide),

@@ -129,37 +129,40 @@ def test_a_narrowed_evaluation_agrees_with_a_wide_one_on_cuda(monkeypatch) -> No
     assert narrowed_steps < wide_steps
 
 
-def test_a_training_step_replayed_from_a_cuda_graph_agrees_with_the_eager_step(monkeypatch) -> None:
-    """The device face's training step recorded in one CUDA graph (``StepGraph``).
-
-    Episodes of 12 steps make the autoresets and the reset-queue top-ups (every 16 steps,
-    outside the graph) part of the 40 steps compared. MuJoCo Warp on CUDA is not repeatable
-    bit for bit: two eager rollouts differed by up to 8.3e-5 in the observations on an H200
-    (2026-11-27), the graphed one from an eager one by 7.8e-5. Every event (an episode's end,
-    a foot's contact) must be the same, and the values within ten times that spread.
-    """
+def _rollout(graphed: bool, deterministic: bool = False) -> tuple[dict, object, TorchVectorEnv]:
+    """A 40-step training rollout of 48 simulations with 12-step episodes on CUDA: its
+    fields on the host, the environment and its face. The autoresets and the reset-queue
+    top-ups (every 16 steps, outside any graph) are part of it."""
     from qdil.envs.vector import LocomotionVectorEnv
     from qdil.rl.collect import Collector
     from qdil.rl.networks import VectorizedActor
 
-    def rollout(graphed: bool) -> tuple[dict, LocomotionVectorEnv, TorchVectorEnv]:
-        monkeypatch.setattr(TorchVectorEnv, "step_graph", graphed)
-        env = LocomotionVectorEnv(
-            "Walker2d-v5", 48, max_episode_steps=12, autoreset_mode="SameStep",
-            backend="warp", device="cuda",
-        )  # fmt: skip
-        face = TorchVectorEnv(env)
-        collector = Collector(face)
-        actor = VectorizedActor(3, 17, 6).to("cuda")
-        stats = RunningMeanStd(3, (17,), device="cuda")
-        generator = torch.Generator(device="cuda").manual_seed(3)
-        collector.start(seed=4)
-        data, extras = collector.collect(actor, stats, 40, generator, update_stats=True)
-        fields = {**vars(data), **vars(extras)}
-        return {k: t.cpu() for k, t in fields.items() if torch.is_tensor(t)}, env, face
+    env = LocomotionVectorEnv(
+        "Walker2d-v5", 48, max_episode_steps=12, autoreset_mode="SameStep",
+        backend="warp", device="cuda", deterministic=deterministic,
+    )  # fmt: skip
+    face = TorchVectorEnv(env)
+    face.step_graph = graphed
+    collector = Collector(face)
+    actor = VectorizedActor(3, 17, 6).to("cuda")  # zero weights: actions are the noise
+    stats = RunningMeanStd(3, (17,), device="cuda")
+    generator = torch.Generator(device="cuda").manual_seed(3)
+    collector.start(seed=4)
+    data, extras = collector.collect(actor, stats, 40, generator, update_stats=True)
+    fields = {**vars(data), **vars(extras)}
+    return {k: t.cpu() for k, t in fields.items() if torch.is_tensor(t)}, env, face
 
-    eager, eager_env, _ = rollout(False)
-    graphed, graphed_env, face = rollout(True)
+
+def test_a_training_step_replayed_from_a_cuda_graph_agrees_with_the_eager_step() -> None:
+    """The device face's training step recorded in one CUDA graph (``StepGraph``).
+
+    MuJoCo Warp on CUDA is not repeatable bit for bit: two eager rollouts differed by up to
+    8.3e-5 in the observations on an H200 (2026-11-27), the graphed one from an eager one
+    by 7.8e-5. Every event (an episode's end, a foot's contact) must be the same, and the
+    values within ten times that spread.
+    """
+    eager, eager_env, _ = _rollout(graphed=False)
+    graphed, graphed_env, face = _rollout(graphed=True)
     assert face._graph is not None and face._graph._graph is not None  # replayed
     assert eager.keys() == graphed.keys()
     for key in eager:
@@ -167,3 +170,15 @@ def test_a_training_step_replayed_from_a_cuda_graph_agrees_with_the_eager_step(m
         atol = 0.0 if exact else 1e-3
         torch.testing.assert_close(graphed[key], eager[key], rtol=0, atol=atol, msg=key)
     assert graphed_env.physics.world_steps == eager_env.physics.world_steps == 40 * 48
+
+
+def test_deterministic_kernels_repeat_a_rollout_bit_for_bit_on_cuda() -> None:
+    """``env.deterministic``: the same rollout twice, and once replayed from a CUDA graph,
+    give the same bits (MuJoCo Warp's sorted contacts and ordered sums)."""
+    first, _, _ = _rollout(graphed=False, deterministic=True)
+    again, _, _ = _rollout(graphed=False, deterministic=True)
+    graphed, _, face = _rollout(graphed=True, deterministic=True)
+    assert face._graph is not None and face._graph._graph is not None  # replayed
+    for key in first:
+        torch.testing.assert_close(again[key], first[key], rtol=0, atol=0, msg=key)
+        torch.testing.assert_close(graphed[key], first[key], rtol=0, atol=0, msg=key)

@@ -38,7 +38,7 @@ def test_the_check_runs_every_step_on_the_cpu(tmp_path: Path, monkeypatch) -> No
     # torch counts host syncs on CUDA alone; the rollout still runs and is timed
     assert saved["syncs"]["syncs"] is None and saved["syncs"]["num_envs"] == 6
     # narrowed; not (its baseline); graphed (on CUDA: Warp's CPU device steps eagerly)
-    for key in ("iterations", "iterations_wide", "iterations_graphed"):
+    for key in ("iterations", "iterations_wide", "iterations_graphed", "iterations_deterministic"):
         assert [row["iteration"] for row in saved[key]] == [1, 2]
         for row in saved[key]:
             assert {"jacobian_seconds", "walk_seconds", "evaluate_seconds"} <= set(row)
@@ -50,7 +50,7 @@ def test_the_check_runs_every_step_on_the_cpu(tmp_path: Path, monkeypatch) -> No
     assert all(row["iter_seconds"] > 0 for rows in side["iterations"] for row in rows)
     # Warp's CPU device plays the same computation to the same bits, narrowed or not
     pairs = saved["repeatability"]
-    assert len(pairs) == 5 and all(pairs.values())
+    assert len(pairs) == 7 and all(pairs.values())
     assert {f: d for diffs in pairs.values() for f, d in diffs.items() if d != 0} == {}
     assert "| evaluation_narrowed_vs_wide |" in (tmp_path / "out" / "gpu_check.md").read_text()
     # the GPU tests skip without CUDA, and the check says so rather than failing
@@ -66,7 +66,7 @@ def test_a_failed_step_is_reported_and_the_others_still_run(tmp_path: Path) -> N
         [
             *("--device", "cpu", "--quick", "--out", str(tmp_path)),
             "--skip=repeatability,breakdown,floor,throughput,iterations_in_turns,iterations_wide,"
-            "iterations_graphed,side_by_side,tests",
+            "iterations_graphed,iterations_deterministic,side_by_side,tests",
             "--set=--env.num_envs 5",  # not divisible by Walker2d's k + 1 = 3
         ]
     )

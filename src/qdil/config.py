@@ -51,6 +51,9 @@ class EnvConfig:
         device: where the run computes: ``cpu``, or ``cuda`` / ``cuda:N`` (``warp`` backend
             only). The physics, policies, VPPO, the reward model (Fabric's accelerator) and
             the bonus run there; pyribs and xNES stay on the host (docs/guides/gpu.md).
+        deterministic: ``warp`` backend: MuJoCo Warp's deterministic kernels, so that a GPU
+            run repeats bit for bit (without them it does not; docs/guides/gpu.md). The
+            ``mujoco`` backend and Warp's CPU device repeat without them.
         max_episode_steps: episode horizon (the paper: 1000).
         task_kwargs: gymnasium keyword arguments of the task (e.g. ``ctrl_cost_weight``).
     """
@@ -61,6 +64,7 @@ class EnvConfig:
     num_threads: int | None = None
     backend: Literal["mujoco", "warp"] = "mujoco"
     device: str = "cpu"
+    deterministic: bool = False
     max_episode_steps: int = 1000
     task_kwargs: dict[str, Any] = field(default_factory=dict)
 

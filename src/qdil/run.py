@@ -76,6 +76,7 @@ def _environment(
         num_threads=env.num_threads,
         backend=env.backend,
         device=device,
+        deterministic=env.deterministic,
         **env.task_kwargs,
     )
 

@@ -233,3 +233,35 @@ def test_graph_replays_equal_launches_from_python(mode: str, device: str) -> Non
     graphs = replayed.physics.graphs.recorded
     recorded = {key[0] for key, graph in graphs.items() if graph is not None}
     assert recorded >= {"step", "sensors", "reset"}
+
+
+def test_deterministic_kernels_are_asked_for_and_agree_with_the_default_ones() -> None:
+    """``env.deterministic``: MuJoCo Warp's deterministic kernels (sorted contacts, ordered
+    constraint rows and sums). On Warp's CPU device both kinds repeat; they agree within
+    float32 rounding over 30 steps of a walker whose feet touch the floor."""
+    mjw = pytest.importorskip("mujoco_warp")
+    make = dict(num_envs=NUM, autoreset_mode="Disabled", backend="warp", device="cpu")
+    default = LocomotionVectorEnv("Walker2d-v5", **make)
+    ordered = LocomotionVectorEnv("Walker2d-v5", deterministic=True, **make)
+    assert default.physics.wmodel.opt.deterministic == mjw.DeterminismType.NONE
+    assert ordered.physics.wmodel.opt.deterministic == mjw.DeterminismType.ALL
+    assert ordered.factory.keywords["deterministic"] is True  # remote shards build it too
+    default.reset(seed=5)
+    ordered.reset(seed=5)
+    rng = np.random.default_rng(1)
+    contacts = 0.0
+    for _ in range(30):
+        actions = rng.uniform(-1, 1, (NUM, 6))
+        _, _, ended, _, info = default.step(actions)
+        _, _, ordered_ended, _, ordered_info = ordered.step(actions)
+        np.testing.assert_array_equal(ordered_info["foot_contact"], info["foot_contact"])
+        np.testing.assert_array_equal(ordered_ended, ended)
+        contacts += info["foot_contact"].sum()
+        if ended.any():
+            default.reset(options={"reset_mask": ended})
+            ordered.reset(options={"reset_mask": ended})
+    assert contacts > 0  # the contact sort had contacts to order
+    for field in ("qpos", "qvel"):
+        np.testing.assert_allclose(
+            ordered.physics.view(field), default.physics.view(field), rtol=0, atol=1e-4
+        )

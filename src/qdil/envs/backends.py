@@ -26,10 +26,13 @@ def make_physics(
     rne_post_constraint: bool,
     num_threads: int | None,
     device: torch.device,
+    deterministic: bool = False,
 ) -> PhysicsBatch:
     """The batch of ``num_sims`` simulations of ``model`` on ``backend`` and ``device``.
 
     The pair was checked by :func:`qdil.devices.run_device` (the environment's constructor).
+    ``deterministic`` asks MuJoCo Warp for its deterministic kernels; MuJoCo's C engine
+    repeats its bits without asking.
     """
     if backend == "mujoco":  # the CPU
         return MujocoBatch(
@@ -45,6 +48,11 @@ def make_physics(
 
         announce_warp_kernels(import_warp()[0])  # the first step may wait for a compile
         return WarpBatch(
-            model, num_sims, exports, rne_post_constraint=rne_post_constraint, device=device
+            model,
+            num_sims,
+            exports,
+            rne_post_constraint=rne_post_constraint,
+            device=device,
+            deterministic=deterministic,
         )
     raise ValueError(f"env.backend must be one of {list(BACKENDS)}, got {backend!r}")

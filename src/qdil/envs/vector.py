@@ -7,8 +7,7 @@ environment follows gymnasium's vector API, including its autoreset modes, and r
 draws its reset noise from its own generator, seeded as gymnasium seeds sub-environment i
 (``seed + i``).
 
-Beyond gymnasium's keys, every ``info`` carries:
-
+Beyond gymnasium's keys, every ``info`` carries ``foot_contact`` and ``episode``:
 - ``foot_contact``: (N, k) float32 0/1 flags, foot j touching the floor in the state the
   info describes (after the step, or after the reset).
 - ``episode``: at the step where an episode ends, a dict with the episode's true return
@@ -56,6 +55,7 @@ class LocomotionVectorEnv(VectorEnv):
         device: where the physics runs, ``"cpu"`` or ``"cuda[:N]"`` (``warp`` only);
             checked here with ``backend`` (:func:`qdil.devices.run_device`), before
             anything is built.
+        deterministic: ``warp``: MuJoCo Warp's deterministic kernels (``env.deterministic``).
         render_mode: ``"rgb_array"``: :meth:`render` draws the first simulation
             (:mod:`qdil.envs.rendering`); ``None``: no rendering.
         **task_kwargs: gymnasium's keyword arguments of the task, e.g. ``ctrl_cost_weight``.
@@ -81,6 +81,7 @@ class LocomotionVectorEnv(VectorEnv):
         backend: str = "mujoco",
         device: str | torch.device = "cpu",
         render_mode: str | None = None,
+        deterministic: bool = False,
         **task_kwargs: Any,
     ) -> None:
         self.backend, self.device = backend, run_device(backend, device)
@@ -92,6 +93,7 @@ class LocomotionVectorEnv(VectorEnv):
             max_episode_steps=max_episode_steps,
             backend=backend,
             device=self.device,
+            deterministic=deterministic,
             **task_kwargs,
         )
         if isinstance(task, str):
@@ -132,6 +134,7 @@ class LocomotionVectorEnv(VectorEnv):
             rne_post_constraint=task.needs_rne,
             num_threads=num_threads,
             device=self.device,
+            deterministic=deterministic,
         )
         self._names = list(task.exports(self.model))
 
@@ -155,7 +158,6 @@ class LocomotionVectorEnv(VectorEnv):
         self._obs = np.zeros((n, obs_dim))
         self._all = np.ones(n, dtype=bool)
 
-    # ----------------------------------------------------------------- helpers
     @property
     def num_feet(self) -> int:
         """Number of measures k."""
@@ -237,7 +239,6 @@ class LocomotionVectorEnv(VectorEnv):
             )
         return actions
 
-    # --------------------------------------------------------------------- API
     def reset(
         self,
         *,

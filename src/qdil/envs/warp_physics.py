@@ -59,6 +59,10 @@ class WarpBatch(PhysicsBatch):
             sensor pass, a reset) in a Warp graph at its first call and replay it after:
             one launch instead of hundreds from Python, the same kernels on the same arrays
             (results are bit-identical; ``tests/envs/test_warp_backend.py``).
+        deterministic: MuJoCo Warp's deterministic kernels (``Option.deterministic``: sorted
+            contacts, ordered constraint rows and reductions), so that the same steps give
+            the same bits on CUDA too, at a cost (docs/guides/gpu.md); Warp's CPU device
+            repeats without them.
 
     Attributes:
         torch_exported: (N, E) float32 tensor on the device, the same values.
@@ -86,6 +90,7 @@ class WarpBatch(PhysicsBatch):
         device: torch.device = torch.device("cpu"),  # noqa: B008 - an immutable value
         num_threads: int | None = None,
         graphs: bool = True,
+        deterministic: bool = False,
     ) -> None:
         super().__init__(model, num_sims, exports)
         if model.opt.solver == mujoco.mjtSolver.mjSOL_PGS:
@@ -107,6 +112,7 @@ class WarpBatch(PhysicsBatch):
         self.torch_device = device
         with self.warp.ScopedDevice(self.warp_device):
             self.wmodel = self.mjw.put_model(model)
+            self.wmodel.opt.deterministic = deterministic  # True: every DeterminismType flag
             self._all = Worlds.make(self.warp, self.mjw, model, num_sims, self._state)
             self._reset_mask = self.warp.zeros(num_sims, dtype=bool)
             # later launches go on torch's stream (_on_torch_stream): finish these first
