@@ -224,6 +224,12 @@ def test_keys_added_later_resume_when_a_checkpoint_lacks_them_at_their_implicit_
     assert config_differences(stored, {"env": {"task": "W", "backend": "warp"}}) == [
         "env.backend: 'mujoco' -> 'warp'"
     ]
+    current = {"env": {"task": "W", "backend": "warp", "deterministic": False}}
+    assert config_differences({"env": {"task": "W", "backend": "warp"}}, current) == []
+    current["env"]["deterministic"] = True
+    assert config_differences({"env": {"task": "W", "backend": "warp"}}, current) == [
+        "env.deterministic: False -> True"
+    ]
     bonus = {"bonus": {"enabled": True, "weight": 0.25}}
     current = {"bonus": {"enabled": True, "weight": 0.25, "type": "single_step", "offset": 0.0}}
     assert config_differences(bonus, current) == []

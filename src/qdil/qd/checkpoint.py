@@ -34,6 +34,7 @@ RESUMABLE_KEYS = ("qd.iterations", "env.num_threads", "logging", "executor")
 IMPLICIT_KEYS = {
     "env.backend": "mujoco",
     "env.device": "cpu",
+    "env.deterministic": False,
     "bonus.type": "single_step",
     "bonus.offset": 0.0,
     "bonus.in_fitness": True,
