@@ -14,7 +14,8 @@ A killed slot leaves its run at its last checkpoint (every 10 iterations); the n
 that takes the run continues it bit for bit. Humanoid's expert runs alone, on both cores:
 the slot that takes it waits for the other slots' runs to end, and they wait while it
 runs. Once it is re-scored, that slot makes the four demonstrations (``qdil demos``, the
-paper's pipeline) that Humanoid's WQDIL and GAIL runs wait for. A run whose record a
+paper's pipeline) that Humanoid's WQDIL and GAIL runs wait for, and ships them with the
+package (``src/qdil/demos/shipped/``, to commit). A run whose record a
 report keeps under ``docs/reports/evidence-<task>/runs/`` is done, on any machine::
 
     qdil report runs/evidence/halfcheetah_* docs/reports/evidence-halfcheetah/runs \
@@ -40,6 +41,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 OUT = Path("runs") / "evidence"
 REPORTS = ROOT / "docs" / "reports"
+SHIPPED = ROOT / "src" / "qdil" / "demos" / "shipped"
+"""The package's demonstration sets: where a set the queue makes is shipped (to commit)."""
 EPISODES = {"HalfCheetah-v5": 12, "Walker2d-v5": 5, "Humanoid-v5": 5}
 """Re-scoring episodes per elite (the protocol's rule for raising them: its page)."""
 WAIT = 120.0
@@ -62,7 +65,7 @@ class Planned:
     alone: bool = False
     """Runs with no other run beside it (it has every core)."""
     demos: str | None = None
-    """The demonstration file the run imitates (under ``OUT``, or kept by its task's report):
+    """The demonstration file the run imitates (under ``OUT``, or shipped with the package):
     it waits until it exists."""
     makes_demos: str | None = None
     """The demonstration file ``qdil demos`` makes from this run (under ``OUT``) once it is
@@ -118,8 +121,8 @@ def _record(run: Planned) -> Path:
 
 
 def _demos(run: Planned) -> Path | None:
-    """The demonstrations ``run`` imitates: made here, or kept by its task's report."""
-    places = [OUT / run.demos, _report(run) / run.demos] if run.demos else []
+    """The demonstrations ``run`` imitates: made here, or shipped with the package."""
+    places = [OUT / run.demos, SHIPPED / run.demos] if run.demos else []
     return next((path.resolve() for path in places if path.is_file()), None)
 
 
@@ -221,10 +224,9 @@ def work(run: Planned) -> None:
         demos = ["demos", str(folder), "--out", str(OUT / run.makes_demos)]
         print(f"{prefix}qdil", " ".join(demos), flush=True)
         subprocess.run([sys.executable, "-m", "qdil.cli", *demos], check=True, env=env)
-        # kept beside the task's report too (to commit): the imitation runs need the same
-        # file on a machine that replaces this one
-        _report(run).mkdir(parents=True, exist_ok=True)
-        shutil.copyfile(OUT / run.makes_demos, _report(run) / run.makes_demos)
+        # shipped (to commit): the protocol ships the set, and the imitation runs need the
+        # same file on a machine that replaces this one
+        shutil.copyfile(OUT / run.makes_demos, SHIPPED / run.makes_demos)
 
 
 def main() -> None:

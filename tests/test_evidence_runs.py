@@ -22,6 +22,8 @@ def runner(tmp_path: Path, monkeypatch):
     monkeypatch.setitem(sys.modules, "evidence_runs", module)  # its dataclass looks it up
     spec.loader.exec_module(module)
     monkeypatch.setattr(module, "REPORTS", tmp_path / "reports")  # not the repository's
+    monkeypatch.setattr(module, "SHIPPED", tmp_path / "shipped")
+    (tmp_path / "shipped").mkdir()
     monkeypatch.chdir(tmp_path)
     (tmp_path / module.OUT).mkdir(parents=True)
     return module
@@ -109,15 +111,15 @@ def test_the_expert_makes_the_demonstrations_the_imitators_read(runner, monkeypa
         "--out",
         str(runner.OUT / "humanoid.npz"),
     ]
-    # kept beside Humanoid's report as well, for a machine that replaces this one
-    kept = runner.REPORTS / "evidence-humanoid" / "humanoid.npz"
+    # shipped with the package as well, for a machine that replaces this one
+    kept = runner.SHIPPED / "humanoid.npz"
     assert kept.read_bytes() == b"demonstrations"
     calls.clear()
     runner.work(wqdil)
     fit, _ = calls
     path = fit[fit.index("--demos.path") + 1]
     assert path == str((runner.OUT / "humanoid.npz").resolve())
-    (runner.OUT / "humanoid.npz").unlink()  # a new machine: only the report's copy is left
+    (runner.OUT / "humanoid.npz").unlink()  # a new machine: only the shipped copy is left
     assert runner.ready(wqdil)
     calls.clear()
     runner.work(wqdil)
