@@ -83,8 +83,8 @@ LAPTOP_TIME = {
 }
 
 # the QD-IL code's reward-model batch size (gail_batchsize)
-SHIPPED_DEMOS = {"walker": "walker2d", "halfcheetah": "halfcheetah"}
-"""Demonstration sets in ``qdil/demos/shipped`` by task; other tasks read ``<task>.npz``."""
+SHIPPED_DEMOS = {"walker": "walker2d", "halfcheetah": "halfcheetah", "humanoid": "humanoid"}
+"""The demonstration set in ``qdil/demos/shipped`` of each task."""
 
 IL_BATCH = {"walker": 120, "halfcheetah": 200, "humanoid": 200}
 
@@ -248,21 +248,12 @@ def recipe(task: str, method: str | None, paper: bool) -> tuple[str, dict]:
     else:
         reward, bonus, label = METHODS[method]
         title = f"{label} on {TASKS[task]}: imitation from the shipped demonstrations."
-        if task not in SHIPPED_DEMOS:
-            title = (
-                f"{label} on {TASKS[task]}: imitation from a demonstration set you make first.\n"
-                "qdil ships none for this task (no expert of useful quality fits a laptop "
-                "budget):\n"
-                f"  qdil fit recipes/{task}_ppga.yaml   (or recipes/paper/{task}_ppga.yaml)\n"
-                f"  qdil demos runs/{task}_ppga-seed0 --out {task}.npz\n"
-                f"then run this recipe from the folder that holds {task}.npz."
-            )
         sections["qd"]["threshold_min"] = -1000.0 if reward in SIGNED_REWARDS else 0.0
         body = {
             "seed": 0,
             "reward": reward_section(task, reward, paper),
             "bonus": bonus_section(bonus, paper),
-            "demos": {"path": SHIPPED_DEMOS.get(task, f"{task}.npz")},
+            "demos": {"path": SHIPPED_DEMOS[task]},
             **sections,
         }
         notes = []
