@@ -17,7 +17,7 @@ from qdil.evaluation.profiles import archive_profile, method_profile, profile_le
 from qdil.evaluation.report import colour_range, format_pvalue, main_table, tukey_tests
 from qdil.evaluation.runs import RunResult, find_runs, group_runs, method_label
 from qdil.evaluation.stats import Summary, align_curves, format_mean_std, summarize, tukey
-from qdil.evaluation.tables import ratio_records, table_records
+from qdil.evaluation.tables import ratio_records, ratio_table, table_records
 
 
 def test_summarize_uses_the_sample_std() -> None:
@@ -142,6 +142,18 @@ def test_deployable_tables_and_ratios_use_the_runs_that_have_that_archive() -> N
     ratios = {(r["archive"], r["qd_score"]): r for r in ratio_records(groups)}
     assert ratios["deployable", "raw"]["value"] == pytest.approx(1.0)
     assert ratios["deployable", "raw"]["n"] == "2/2" and ratios["true", "raw"]["n"] == "4/4"
+
+
+def test_a_ratio_of_one_seed_a_side_is_shown_without_an_interval() -> None:
+    groups = group_runs(
+        [fake_run("Humanoid-v5", m, v, 0) for m, v in (("GAIL", 2e5), ("WQDIL", 3e5))]
+    )
+    records = [
+        r for r in ratio_records(groups) if r["archive"] == "true" and r["qd_score"] == "raw"
+    ]
+    _, rows = ratio_table(records)
+    assert [row[4] for row in rows] == ["1.50, no interval: one seed"]
+    assert rows[0][5] == "1/1" and rows[0][6] == "–"
 
 
 def test_duplicate_seeds_are_flagged() -> None:

@@ -211,6 +211,8 @@ def ratio_table(records: Sequence[Mapping[str, Any]]) -> tuple[list[str], list[l
             cell += ", unbounded: the reference's mean may be 0"
         elif not math.isnan(r["low"]):
             cell += f" [{r['low']:.2f}, {r['high']:.2f}]"
+        elif not math.isnan(r["value"]):
+            cell += ", no interval: one seed"
         needed = "–" if r["seeds_to_resolve"] is None else str(r["seeds_to_resolve"])
         archive = ARCHIVES[r["archive"]]
         rows.append([_short(r["task"]), archive, r["qd_score"], r["ratio"], cell, r["n"], needed])
