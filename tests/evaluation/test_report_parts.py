@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import statistics
 from pathlib import Path
 from types import SimpleNamespace
@@ -14,7 +15,13 @@ from scipy.stats import tukey_hsd
 from qdil.evaluation import document as doc
 from qdil.evaluation.configurations import flag_duplicate_seeds
 from qdil.evaluation.profiles import archive_profile, method_profile, profile_levels
-from qdil.evaluation.report import colour_range, format_pvalue, main_table, tukey_tests
+from qdil.evaluation.report import (
+    colour_range,
+    format_pvalue,
+    keep_records,
+    main_table,
+    tukey_tests,
+)
 from qdil.evaluation.runs import RunResult, find_runs, group_runs, method_label
 from qdil.evaluation.stats import Summary, align_curves, format_mean_std, summarize, tukey
 from qdil.evaluation.tables import ratio_records, ratio_table, table_records
@@ -154,6 +161,30 @@ def test_a_ratio_of_one_seed_a_side_is_shown_without_an_interval() -> None:
     _, rows = ratio_table(records)
     assert [row[4] for row in rows] == ["1.50, no interval: one seed"]
     assert rows[0][5] == "1/1" and rows[0][6] == "–"
+
+
+def test_records_carry_the_provenance_the_report_took_before_writing(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # a report rewriting its own tracked folder must not call its tree dirty
+    import qdil.evaluation.records as records
+
+    def taken_too_late() -> dict:
+        raise AssertionError("the record asked for a provenance of its own")
+
+    monkeypatch.setattr(records, "provenance", taken_too_late)
+    run_dir = tmp_path / "gail-seed0"
+    run_dir.mkdir()
+    (run_dir / "config.yaml").write_text("seed: 0\n")
+    archive = GridArchive(solution_dim=1, dims=[2, 2], ranges=[(0, 1), (0, 1)])
+    archive.add([[0.0]], [5.0], [[0.2, 0.7]])
+    run = fake_run("Humanoid-v5", "GAIL", 5.0)
+    run.path, run.archive, run.iteration = run_dir, archive, 100
+    made_by = {"commit": "e168ef1", "dirty": False}
+    assert keep_records([run], tmp_path / "out" / "runs", made_by) == ["runs/gail-seed0"]
+    record = json.loads((tmp_path / "out" / "runs" / "gail-seed0" / "record.json").read_text())
+    assert record["provenance"]["report"] == made_by
+    assert (tmp_path / "out" / "runs" / "gail-seed0" / "config.yaml").read_text() == "seed: 0\n"
 
 
 def test_duplicate_seeds_are_flagged() -> None:

@@ -62,13 +62,15 @@ def is_record(path: Path) -> bool:
     return (path / RECORD_JSON).is_file() and not (path / "checkpoints").is_dir()
 
 
-def write_record(run_dir: Path, record: Record, dest: Path) -> Path:
+def write_record(run_dir: Path, record: Record, dest: Path, made_by: dict | None = None) -> Path:
     """Write the record of a run into ``dest`` (replaced if it exists).
 
     Args:
         run_dir: the run directory (or a record kept by another report, copied as it is).
         record: the run's final numbers and archive, as the report read them.
         dest: the record's folder.
+        made_by: the report's provenance, taken before it wrote anything (default: now;
+            a report rewriting its tracked folder would otherwise call its own tree dirty).
 
     Returns:
         ``dest``.
@@ -103,7 +105,7 @@ def write_record(run_dir: Path, record: Record, dest: Path) -> Path:
             [float(lo), float(hi)]
             for lo, hi in zip(archive.lower_bounds, archive.upper_bounds, strict=True)
         ],
-        "provenance": _provenance(run_dir),
+        "provenance": _provenance(run_dir, made_by),
     }
     (tmp / RECORD_JSON).write_text(json.dumps(summary, indent=1) + "\n")
     data = archive.data(["index", "objective", "measures"])
@@ -118,9 +120,9 @@ def write_record(run_dir: Path, record: Record, dest: Path) -> Path:
     return _swap(tmp, dest)
 
 
-def _provenance(run_dir: Path) -> dict:
+def _provenance(run_dir: Path, made_by: dict | None) -> dict:
     """Who made the run's numbers: training starts, re-scoring, and this report."""
-    found: dict = {"training": None, "evaluation": None, "report": provenance()}
+    found: dict = {"training": None, "evaluation": None, "report": made_by or provenance()}
     if (run_dir / PROVENANCE_JSON).is_file():
         found["training"] = json.loads((run_dir / PROVENANCE_JSON).read_text())
     if (run_dir / EVAL_JSON).is_file():

@@ -41,6 +41,7 @@ from qdil.evaluation.tables import (
     tukey_tests,
     write_csv,
 )
+from qdil.provenance import provenance
 
 # the report's public names, importable from here as before the split
 __all__ = [
@@ -90,6 +91,7 @@ def write_report(
     Returns:
         What was written (also the data behind it).
     """
+    made_by = provenance()  # before this report rewrites anything of its tree
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     runs = collect_runs(paths, labels)
@@ -107,16 +109,17 @@ def write_report(
     profiles = plot_profiles(groups, out)
     _write_files(report, heatmaps, curves, profiles, grids)
     if records:
-        report.files += keep_records(runs, out / "runs")
+        report.files += keep_records(runs, out / "runs", made_by)
     return report
 
 
-def keep_records(runs: Iterable[RunResult], folder: Path) -> list[str]:
+def keep_records(runs: Iterable[RunResult], folder: Path, made_by: dict | None = None) -> list[str]:
     """Write the record of every included run into ``folder``, one sub-folder per run.
 
     Args:
         runs: the report's runs; left-out ones are skipped.
         folder: where the records go (created).
+        made_by: the report's provenance (default: taken as each record is written).
 
     Returns:
         The records' folders, relative to ``folder``'s parent.
@@ -141,7 +144,7 @@ def keep_records(runs: Iterable[RunResult], folder: Path) -> list[str]:
             run.deployable,
             run.deployable_source,
         )
-        write_record(run.path, record, folder / name)
+        write_record(run.path, record, folder / name, made_by)
         written.append(f"{folder.name}/{name}")
     return written
 
