@@ -19,7 +19,7 @@ from ribs.archives import GridArchive
 
 from qdil.evaluation.rescore import EVAL_JSON
 from qdil.files import CONFIG_NAME
-from qdil.provenance import PROVENANCE_JSON, provenance
+from qdil.provenance import PROVENANCE_JSON
 
 RECORD_JSON = "record.json"
 ARCHIVE_CSV = "archive.csv"
@@ -62,15 +62,15 @@ def is_record(path: Path) -> bool:
     return (path / RECORD_JSON).is_file() and not (path / "checkpoints").is_dir()
 
 
-def write_record(run_dir: Path, record: Record, dest: Path, made_by: dict | None = None) -> Path:
+def write_record(run_dir: Path, record: Record, dest: Path, made_by: dict) -> Path:
     """Write the record of a run into ``dest`` (replaced if it exists).
 
     Args:
         run_dir: the run directory (or a record kept by another report, copied as it is).
         record: the run's final numbers and archive, as the report read them.
         dest: the record's folder.
-        made_by: the report's provenance, taken before it wrote anything (default: now;
-            a report rewriting its tracked folder would otherwise call its own tree dirty).
+        made_by: the report's provenance, taken before it wrote anything (a report
+            rewriting its tracked folder would otherwise call its own tree dirty).
 
     Returns:
         ``dest``.
@@ -120,9 +120,9 @@ def write_record(run_dir: Path, record: Record, dest: Path, made_by: dict | None
     return _swap(tmp, dest)
 
 
-def _provenance(run_dir: Path, made_by: dict | None) -> dict:
+def _provenance(run_dir: Path, made_by: dict) -> dict:
     """Who made the run's numbers: training starts, re-scoring, and this report."""
-    found: dict = {"training": None, "evaluation": None, "report": made_by or provenance()}
+    found: dict = {"training": None, "evaluation": None, "report": made_by}
     if (run_dir / PROVENANCE_JSON).is_file():
         found["training"] = json.loads((run_dir / PROVENANCE_JSON).read_text())
     if (run_dir / EVAL_JSON).is_file():

@@ -113,13 +113,13 @@ def write_report(
     return report
 
 
-def keep_records(runs: Iterable[RunResult], folder: Path, made_by: dict | None = None) -> list[str]:
+def keep_records(runs: Iterable[RunResult], folder: Path, made_by: dict) -> list[str]:
     """Write the record of every included run into ``folder``, one sub-folder per run.
 
     Args:
         runs: the report's runs; left-out ones are skipped.
         folder: where the records go (created).
-        made_by: the report's provenance (default: taken as each record is written).
+        made_by: the report's provenance, taken before it wrote anything.
 
     Returns:
         The records' folders, relative to ``folder``'s parent.
