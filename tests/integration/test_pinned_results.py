@@ -56,18 +56,17 @@ def fingerprint() -> str:
 
 
 PINS: dict[str, dict[str, str]] = {
-    # recorded with MKL's reproducibility mode (issue 29), from code pinned bit-identical
-    # since 3af8089 on the AMD EPYC machine, after Evaluation gained ``true_std`` and runs
-    # the deployable archive (both checked to leave every other byte as it was); the AMD
-    # pins of that time were recorded without the mode and are to be recorded again there
-    "x86_64/Intel(R) Xeon(R) Processor @ 2.50GHz/AVX512/MKL AVX512_E1,STRICT/"
-    "torch 2.13.0+cpu/numpy 2.4.6/mujoco 4.0.0": {
-        "training_rollouts": "6be6d1f636f2592b3a96eec938fe8b220764d0138e5413640fb3564bcc4bf8c0",
-        "evaluation_False": "4637d7b98c0c1f23d2025af2e1701e97fd648aeb9f38745e899d70febd3940cd",
-        "evaluation_True": "f343c4f33b6ba9668db6bf334d59cf46346d47594120a8fe5316f27ba1b87d95",
-        "vppo_phases": "37206bba1eb55a1ef364ce213611e98f5a570d33f715a1da7ab8a74261d0d8b6",
-        "fit_true": "59b3707253d644b6679ae095ed0d246c67b84372d7b2be25d56c6d7f8cad4a24",
-        "fit_wqdil": "9d334151c17504712f59344120fb18442e9b42fcc579ff61d5e5b9d554d1bcdb",
+    # recorded on 2026-11-28 after policy inference on the CPU began to compute every row alone
+    # (qdil.rl.inference, issue 46), which changed every rollout's last bits. Intel Xeon
+    # (AVX-512, MKL AVX512_E1,STRICT): pending, to be recorded on such a machine with
+    # QDIL_PRINT_PINS=1; its pins of before that change no longer hold.
+    "x86_64/AMD EPYC/AVX512/MKL AUTO,STRICT/torch 2.13.0+cpu/numpy 2.4.6/mujoco 4.0.0": {
+        "training_rollouts": "39d7f39735152ddf57809a13f71117be3c298b44e6a76dab6d9e8580f70121f7",
+        "evaluation_False": "417d0818551ec0618db22a644c0f065ee3a4bacd1ccfaa639fe0c5b3abefa28d",
+        "evaluation_True": "b2a335ed213c3599240facb0c1de1d20a5f5ef36cd3ed7d365558db25a312874",
+        "vppo_phases": "1746a8ff4d57411b2a780747d7478eeeb51fcfaa098d854c2879ad518ae9a857",
+        "fit_true": "609999ff97bc06b970714a72464bf069224242e3b9adbc68901f9af7f4914677",
+        "fit_wqdil": "e5f5e71bad998b0b6386abf7eedf52928cba2ecc7549013717218e84a2e2942a",
     },
 }
 

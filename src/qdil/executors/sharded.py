@@ -23,7 +23,7 @@ from qdil.data import Rollout
 from qdil.devices import DEVICE_BACKENDS
 from qdil.envs.vector import LocomotionVectorEnv
 from qdil.executors.base import Executor
-from qdil.executors.shards import MIN_ROWS, advance, payload_bytes, shard_bounds
+from qdil.executors.shards import advance, payload_bytes, shard_bounds
 from qdil.executors.worker import CollectCall, EvaluateCall, Phase
 from qdil.rl.collect import EpisodeLog, PolicyData, RewardFn, RolloutSteps, finish_rollout
 from qdil.rl.episodes import Evaluation, Played, score
@@ -90,14 +90,13 @@ class ShardedExecutor(Executor):
         self.num_envs, self.eval_capacity = train_env.num_envs, eval_env.num_envs
         self.action_dim = train_env.single_action_space.shape[0]
         self.obs_clip = obs_clip
-        block = train_env.num_envs // (train_env.num_feet + 1)  # VPPO's k+1 copies
-        self.bounds = shard_bounds(train_env.num_envs, max(block, 1), self.num_workers, MIN_ROWS)
+        self.bounds = shard_bounds(train_env.num_envs, self.num_workers)
         if len(self.bounds) < self.num_workers:
             warnings.warn(
                 f"executor num_workers: {self.num_workers} asked, but {train_env.num_envs} "
-                f"training simulations make {len(self.bounds)} shard(s) (a shard keeps at least "
-                f"{MIN_ROWS} simulations of each policy it holds), so {len(self.bounds)} "
-                "worker(s) run; more simulations (env.num_envs) would use more",
+                f"training simulations make {len(self.bounds)} shard(s) of at least one "
+                f"simulation, so {len(self.bounds)} worker(s) run; more simulations "
+                "(env.num_envs) would use more",
                 stacklevel=2,
             )
         self._launch(train_env.factory, self.bounds)
@@ -172,7 +171,7 @@ class ShardedExecutor(Executor):
         )
         handle = self._share(call)
         # at most one shard per worker started (a small training batch may start fewer)
-        bounds = shard_bounds(used, episodes, len(self.bounds))
+        bounds = shard_bounds(used, len(self.bounds))
         shards = [(i, (handle, a, b)) for i, (a, b) in enumerate(bounds)]
         plays: list[Played] = self._run("evaluate", shards)
         num_steps = max(p.num_steps for p in plays)

@@ -6,13 +6,9 @@ block [p·B, (p+1)·B). Two things make a shard's numbers those of the whole bat
 - the action noise: the head draws one (N, A) standard normal tensor per step from its
   generator; :class:`NoiseReplay` replays that stream from the generator's state and keeps
   the shard's rows (every worker draws N·A numbers per step: a few µs per thousand);
-- the policies: :class:`ShardPolicies` runs each policy on its rows of the shard. A matrix
-  product's row does not depend on the rows beside it, except that CPU BLAS (MKL) takes
-  other kernels for products of fewer than four rows, whose last bit depends on how the
-  input is aligned in memory (measured; ``tests/executors`` checks it). So a shard holds
-  either whole policy blocks, their input placed at the whole batch's alignment
-  (``PolicySampler``'s ``align``), or at least :data:`MIN_ROWS` rows of a policy:
-  :func:`shard_bounds` cuts only there.
+- the policies: :class:`ShardPolicies` runs each policy on its rows of the shard, and on
+  the CPU a row's outputs do not depend on the rows computed beside it
+  (:mod:`qdil.rl.inference`), so a shard may cut a policy's block anywhere.
 """
 
 from __future__ import annotations
@@ -26,40 +22,19 @@ from qdil.rl.networks import VectorizedActor
 from qdil.rl.normalize import RunningMeanStd
 from qdil.rl.sampler import PolicySampler
 
-MIN_ROWS = 4
-"""Fewest rows of one policy a shard boundary may cut off (see the module docstring)."""
 
-
-def shard_bounds(n: int, block: int, num_shards: int, min_size: int = 1) -> list[tuple[int, int]]:
-    """Split n slots into at most ``num_shards`` contiguous, near-equal shards.
-
-    A boundary that would leave fewer than :data:`MIN_ROWS` slots of a policy block on
-    one side moves to the block's edge; shards smaller than ``min_size`` join a neighbour.
+def shard_bounds(n: int, num_shards: int) -> list[tuple[int, int]]:
+    """Split n slots into at most ``num_shards`` contiguous, near-equal, non-empty shards.
 
     Args:
         n: slots N.
-        block: slots per policy B (N divisible by B).
         num_shards: workers available.
-        min_size: fewest slots of a shard (training shards also serve the one-policy walk,
-            whose block is all N: :data:`MIN_ROWS`).
 
     Returns:
-        Non-empty ``(start, stop)`` ranges covering [0, n) in order.
+        ``(start, stop)`` ranges covering [0, n) in order.
     """
-    cuts = set()
-    for i in range(1, num_shards):
-        cut = round(i * n / num_shards)
-        low = cut - cut % block
-        if cut - low < MIN_ROWS:
-            cut = low
-        elif low + block - cut < MIN_ROWS:
-            cut = min(low + block, n)
-        cuts.add(cut)
-    edges = [0]
-    for cut in sorted(cuts):
-        if cut - edges[-1] >= max(min_size, 1) and n - cut >= min_size:
-            edges.append(cut)
-    return list(itertools.pairwise([*edges, n]))
+    edges = sorted({round(i * n / num_shards) for i in range(num_shards + 1)})
+    return list(itertools.pairwise(edges))
 
 
 class NoiseReplay:
@@ -119,18 +94,15 @@ class ShardPolicies:
         solutions = actor.get_solutions()
         obs_dim, hidden = actor.sizes[0], actor.sizes[1:-1]
 
-        def sampler(index: list[int], first: int) -> PolicySampler:
+        def sampler(index: list[int]) -> PolicySampler:
             part = VectorizedActor(len(index), obs_dim, actor.sizes[-1], hidden)
             part.set_solutions(solutions[index])
-            # the input sits as row ``first`` of the whole batch would (module docstring)
-            return PolicySampler(part, stats.select(index), obs_clip, align=first * obs_dim)
+            return PolicySampler(part, stats.select(index), obs_clip)
 
-        if len({b - a for a, b in pieces}) == 1:  # equal pieces: one batched product, as local
-            self.groups = [(0, stop - start, sampler(policies, start))]
+        if len({b - a for a, b in pieces}) == 1:  # equal pieces: one call for all
+            self.groups = [(0, stop - start, sampler(policies))]
         else:
-            self.groups = [
-                (a, b, sampler([p], start + a)) for p, (a, b) in zip(policies, pieces, strict=True)
-            ]
+            self.groups = [(a, b, sampler([p])) for p, (a, b) in zip(policies, pieces, strict=True)]
 
     def sample(
         self, obs: torch.Tensor, noise: torch.Tensor | None, deterministic: bool, log_probs: bool

@@ -3,7 +3,9 @@
 :class:`PolicySampler` is the per-step policy inference of every rollout and evaluation
 (:mod:`qdil.rl.collect`): the N observations are cut into P contiguous blocks, one per
 policy, normalised with the policy's statistics, and the Gaussian policy's actions and
-log-likelihoods computed exactly as ``torch.distributions.Normal`` does.
+log-likelihoods computed. On the CPU every row is computed alone
+(:mod:`qdil.rl.inference`), so its bits do not depend on the batch; on a device, with
+torch's batched products.
 """
 
 from __future__ import annotations
@@ -12,6 +14,7 @@ import math
 
 import torch
 
+from qdil.rl.inference import RowwisePolicies
 from qdil.rl.networks import VectorizedActor
 from qdil.rl.normalize import RunningMeanStd
 
@@ -25,34 +28,25 @@ class PolicySampler:
     Rollouts call the policies once per env step, so everything that does not change
     between steps is computed once here: the float32 observation mean and scale, σ and
     2σ². A step is then the normalisation, the MLP and a few elementwise ops, with none
-    of ``torch.distributions.Normal``'s object and validation overhead. The arithmetic is
-    the same as :meth:`RunningMeanStd.normalize` and ``Normal.log_prob`` op for op (σ and
-    2σ² broadcast from (P, 1, A) instead of being expanded, which leaves every element's
-    value unchanged), so actions and log-likelihoods are bit-identical to theirs.
+    of ``torch.distributions.Normal``'s object and validation overhead.
 
-    CPU BLAS (MKL) takes a different path for a small batched product whose input is not
-    64-byte aligned, which changes the last bit. A sampler for part of a larger batch (a
-    remote worker's shard) passes ``align``: its normalised input is then placed where the
-    whole batch's would be, relative to a 64-byte boundary, so its products are those of
-    the whole batch.
+    On the CPU the step is :class:`~qdil.rl.inference.RowwisePolicies`: each row alone, in
+    one fixed order, so a row's outputs are the same bits in a batch of any size (a remote
+    worker's shard, an evaluation batch, a single rendered episode), with any thread count.
+    On a device the arithmetic is :meth:`RunningMeanStd.normalize`'s and
+    ``Normal.log_prob``'s op for op, with torch's batched products, whose last bits follow
+    the batch's shape there.
 
     Args:
         actor: P policies; their parameters must not change while the sampler is used.
         stats: their observation statistics (frozen).
         obs_clip: bound of normalised observations (``None``: no clipping).
-        align: float32 elements between a 64-byte boundary and the first policy's input
-            in the whole batch (0: the input is a fresh, aligned tensor, as locally).
     """
 
     def __init__(
-        self,
-        actor: VectorizedActor,
-        stats: RunningMeanStd,
-        obs_clip: float | None,
-        align: int = 0,
+        self, actor: VectorizedActor, stats: RunningMeanStd, obs_clip: float | None
     ) -> None:
         self.actor = actor
-        self.align = align % 16  # 16 float32 elements: 64 bytes
         self.num_policies = actor.num_models
         self.obs_clip = obs_clip
         with torch.no_grad():
@@ -62,6 +56,17 @@ class PolicySampler:
             self.two_var = 2 * self.std**2
             self.log_scale = self.std.log()
             self.operands = actor.operands()
+        self.rowwise = None
+        if self.std.device.type == "cpu":
+            self.rowwise = RowwisePolicies(
+                actor.sizes,
+                list(actor.weights),
+                list(actor.biases),
+                self.obs_mean.squeeze(1),
+                self.obs_scale.squeeze(1),
+                self.std.squeeze(1),
+                obs_clip,
+            )
 
     def sample(
         self,
@@ -85,14 +90,15 @@ class PolicySampler:
             ``(norm_obs, actions, log_probs)``: (N, obs_dim), (N, A) unclipped, (N,).
         """
         n = obs.shape[0]
+        if self.rowwise is not None:
+            if not deterministic and noise is None:
+                noise = torch.randn((n, self.std.shape[-1]), generator=generator)
+            return self.rowwise.sample(obs, None if deterministic else noise, log_probs)
         with torch.no_grad():
             x = obs.reshape(self.num_policies, n // self.num_policies, obs.shape[1])
             norm = (x - self.obs_mean) / self.obs_scale
             if self.obs_clip is not None:
                 norm = norm.clamp(-self.obs_clip, self.obs_clip)
-            if self.align:
-                placed = torch.empty(norm.numel() + self.align)[self.align :].view(norm.shape)
-                norm = placed.copy_(norm)
             mean = self.actor.mlp(norm, self.operands)
             if deterministic:
                 actions = mean
