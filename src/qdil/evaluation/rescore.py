@@ -160,7 +160,7 @@ def rescore(
         rows = np.arange(start, min(start + width, count))
         actor, stats = elite_policies(elites, rows, env, settings.actor_hidden)
         result = evaluate_policies(
-            face, actor, stats, episodes, seed + start, None, True, settings.obs_clip
+            face, actor, stats, episodes, seed + start * episodes, None, True, settings.obs_clip
         )
         objective[rows], measures[rows], lengths[rows] = (
             result.true_objective,
