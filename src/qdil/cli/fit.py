@@ -284,7 +284,9 @@ def fit(argv: list[str]) -> None:
     tracker = cast("Tracker", run.tracker)  # build_run's; the loop sees only its RunTracker face
     if tracker.csv.path.exists():  # rows logged after the checkpoint (all, if none)
         tracker.csv.truncate(run.state.iteration)
-    record_start(run_dir, run.state.iteration)
+    note = record_start(run_dir, run.state.iteration)
+    if note is not None:
+        print(f"qdil fit: warning: {run_dir} is {note}", file=sys.stderr)
     try:
         run_qd(run)
     except NonFiniteRewardError as error:

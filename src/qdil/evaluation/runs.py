@@ -8,6 +8,7 @@ unfinished, and why: docs/guides/reproduce-paper-results.md.
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import importlib
 import json
@@ -25,6 +26,7 @@ from ribs.archives import GridArchive
 from qdil.evaluation.records import RecordError, is_record, read_record
 from qdil.evaluation.rescore import CORRECTED, EVAL_JSON
 from qdil.files import CONFIG_NAME
+from qdil.provenance import PROVENANCE_JSON, mixed_vendors_note
 from qdil.qd.archives import QD_OFFSETS, qd_metrics, true_keyed
 from qdil.qd.checkpoint import CheckpointError, load_archives
 
@@ -335,6 +337,11 @@ def load_run(path: Path, label: str | None = None) -> RunResult:
         steps = next(iter(run.curves.values()))[0]
         run.last_logged = int(steps[-1]) if len(steps) else None
     _final_archive(run, label)
+    if (path / PROVENANCE_JSON).is_file():
+        with contextlib.suppress(ValueError, TypeError, AttributeError):
+            note = mixed_vendors_note(json.loads((path / PROVENANCE_JSON).read_text()))
+            if note is not None and note not in run.notes:  # a record keeps its note
+                run.notes.append(note)
     if run.included and run.unfinished:
         run.notes.insert(
             0,
