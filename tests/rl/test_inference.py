@@ -143,3 +143,9 @@ def test_rowwise_policies_take_no_clip_as_none() -> None:
     norm, _, _ = PolicySampler(actor, stats, None).sample(obs, None, True, log_probs=False)
     assert (norm.abs() > 1e4).all()
     assert isinstance(PolicySampler(actor, stats, None).rowwise, RowwisePolicies)
+
+
+def test_observations_that_do_not_split_among_the_policies_are_refused() -> None:
+    actor, stats = policies(3, 17, 6, (8,))
+    with pytest.raises(ValueError, match="7 observations cannot be split among 3 policies"):
+        PolicySampler(actor, stats, 10.0).sample(torch.zeros(7, 17), None, True)

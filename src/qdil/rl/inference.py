@@ -198,8 +198,13 @@ class RowwisePolicies:
         Returns:
             ``(norm_obs, actions, log_probs)``: (N, obs_dim), (N, A) unclipped, (N,) or
             ``None``.
+
+        Raises:
+            ValueError: N is not a multiple of P.
         """
         n, num_actions = obs.shape[0], self.std.shape[1]
+        if n % self.num_policies:
+            raise ValueError(f"{n} observations cannot be split among {self.num_policies} policies")
         norm = torch.empty(obs.shape, dtype=torch.float32)
         actions = torch.empty((n, num_actions), dtype=torch.float32)
         logp = torch.empty(n if log_probs else 0, dtype=torch.float32)
