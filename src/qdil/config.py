@@ -75,6 +75,10 @@ class QDConfig:
 
     Attributes:
         iterations: QD iterations (the paper: 2000).
+        env_steps: a budget in simulated env steps (``null``: none): the run stops at the
+            end of the first iteration that reaches it, or at ``iterations``, whichever
+            comes first, so that methods with different steps per iteration compare at
+            equal cost.
         cells: grid cells per measure (the paper: 50, i.e. 50×50 for two feet).
         archive_learning_rate: CMA-MAE archive learning rate α.
         threshold_min: CMA-MAE minimum threshold.
@@ -89,6 +93,7 @@ class QDConfig:
     """
 
     iterations: int = 2000
+    env_steps: int | None = None
     cells: int = 50
     archive_learning_rate: float = 0.5
     threshold_min: float = 200.0
@@ -98,6 +103,18 @@ class QDConfig:
     fitness: Literal["reward", "true"] = "reward"
     emitter: EmitterFactory | None = None
     scheduler: SchedulerFactory | None = None
+
+
+def finished(qd: QDConfig | Any, iteration: int, env_steps: int) -> bool:
+    """Whether a run that completed ``iteration`` after ``env_steps`` env steps stops there.
+
+    Args:
+        qd: the recipe's ``qd`` section (a :class:`QDConfig` or the parsed namespace).
+        iteration: QD iterations completed.
+        env_steps: env steps simulated by then.
+    """
+    budget = qd.env_steps
+    return iteration >= qd.iterations or (budget is not None and env_steps >= budget)
 
 
 @dataclass

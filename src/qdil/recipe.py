@@ -37,6 +37,7 @@ MINIMUMS: dict[str, float] = {
     "env.num_threads": 1,
     "env.max_episode_steps": 1,
     "qd.iterations": 1,
+    "qd.env_steps": 1,
     "qd.cells": 1,
     "qd.branch_episodes": 1,
     "qd.mean_episodes": 1,

@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 from tqdm.auto import tqdm
 
+from qdil.config import finished
 from qdil.files import atomic_write
 
 if TYPE_CHECKING:
@@ -27,6 +28,10 @@ class _Counters(Protocol):
     @property
     def iteration(self) -> int:
         """The current QD iteration."""
+
+    @property
+    def env_steps(self) -> int:
+        """Env steps simulated so far."""
 
 
 class TrackedRun(Protocol):
@@ -42,7 +47,7 @@ class TrackedRun(Protocol):
 
     @property
     def qd(self) -> QDConfig:
-        """Its QD settings (``iterations``: the last iteration gets a heatmap)."""
+        """Its QD settings (the last iteration, :func:`finished`, gets a heatmap)."""
 
     @property
     def archives(self) -> RunArchives:
@@ -237,7 +242,9 @@ class Tracker:
         if self.wandb is not None:
             self.wandb.log_metrics(metrics, step=iteration)
             every = self.logging.heatmap_every
-            if every and (iteration % every == 0 or iteration == run.qd.iterations):
+            if every and (
+                iteration % every == 0 or finished(run.qd, iteration, run.state.env_steps)
+            ):
                 from qdil.evaluation.plots import archive_heatmap
 
                 figure = archive_heatmap(

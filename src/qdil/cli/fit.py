@@ -21,12 +21,13 @@ if TYPE_CHECKING:
 
 FIT_USAGE = (
     "qdil fit RECIPE.yaml [--section.key VALUE ...]\n"
-    "       qdil fit --resume RUN_DIR [--qd.iterations N ...]"
+    "       qdil fit --resume RUN_DIR [--qd.iterations N] [--qd.env_steps N ...]"
 )
 FIT_EPILOG = (
     "--resume continues RUN_DIR from its last checkpoint with the recipe in its config.yaml; "
     "a run that stopped before its first checkpoint starts over in place. Only qd.iterations, "
-    "env.num_threads, executor.* and logging.* may differ from the checkpoint's recipe. "
+    "qd.env_steps, env.num_threads, executor.* and logging.* may differ from the checkpoint's "
+    "recipe. "
     "--reward.help NAME (a registered name, class name or class path) lists a reward "
     "model's options."
 )
@@ -217,6 +218,7 @@ def fit(argv: list[str]) -> None:
         fit_help(help_request)
     import yaml
 
+    from qdil.config import finished
     from qdil.executors.base import ExecutorError
     from qdil.files import atomic_write, remove_stale_temporaries
     from qdil.provenance import record_start
@@ -249,10 +251,15 @@ def fit(argv: list[str]) -> None:
     if resume_dir is not None and (run_dir / CHECKPOINT).exists():
         state = read_checkpoint(run_dir / CHECKPOINT)
         _check_unchanged(state, yaml.safe_load(resolved), run_dir, config_differences)
-        if state["iteration"] >= config.qd.iterations:  # nothing to run: nothing to write
+        if finished(config.qd, state["iteration"], state["env_steps"]):  # nothing to run or write
+            how = "--qd.iterations N continues it to N"
+            spent = ""
+            if config.qd.env_steps is not None:
+                how = "--qd.iterations N and --qd.env_steps N continue it"
+                spent = f", {state['env_steps']:,} env steps of a budget of {config.qd.env_steps:,}"
             print(
                 f"{run_dir} is finished: iteration {state['iteration']} of "
-                f"{config.qd.iterations}; nothing to do (--qd.iterations N continues it to N)",
+                f"{config.qd.iterations}{spent}; nothing to do ({how})",
                 file=sys.stderr,
             )
             return
@@ -326,7 +333,7 @@ def _check_unchanged(
             f"checkpoint was made with (checkpoint -> now):\n{lines}\n"
             "Restore these keys to resume, or start a new run from the edited file with "
             f"`qdil fit {run_dir / CONFIG_NAME} --name NEW_NAME`. Only qd.iterations, "
-            "env.num_threads, executor.* and logging.* may change on resume."
+            "qd.env_steps, env.num_threads, executor.* and logging.* may change on resume."
         )
 
 

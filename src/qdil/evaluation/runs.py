@@ -102,11 +102,19 @@ class RunResult:
 
     @property
     def unfinished(self) -> bool:
-        """Whether the run stopped before ``qd.iterations`` (logged or checkpointed)."""
+        """Whether the run stopped before ``qd.iterations`` and its ``qd.env_steps`` budget."""
         if self.target is None:
             return False
         reached = [i for i in (self.last_logged, self.iteration) if i is not None]
-        return bool(reached) and min(reached) < self.target
+        return bool(reached) and min(reached) < self.target and not self._spent(min(reached))
+
+    def _spent(self, iteration: int) -> bool:
+        """Whether the run's env steps at ``iteration`` (logged) reached its budget."""
+        budget = (self.config.get("qd") or {}).get("env_steps")
+        steps, values = self.curves.get("perf/env_steps", ((), ()))
+        return budget is not None and any(
+            s == iteration and v >= budget for s, v in zip(steps, values, strict=True)
+        )
 
     @property
     def status(self) -> str:

@@ -28,7 +28,7 @@ CHECKPOINT = Path("checkpoints") / "last.pt"
 # Recipe keys a resume may change: they set how long the run goes on and what it writes,
 # not what it computes (physics threads and the executor change speed only: a run stopped
 # on a cluster may resume locally, and the other way round).
-RESUMABLE_KEYS = ("qd.iterations", "env.num_threads", "logging", "executor")
+RESUMABLE_KEYS = ("qd.iterations", "qd.env_steps", "env.num_threads", "logging", "executor")
 # Recipe keys added after checkpoints stored their recipe, with the value that runs made
 # before them used implicitly: a checkpoint without the key resumes when it has that value.
 IMPLICIT_KEYS = {

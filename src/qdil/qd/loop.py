@@ -31,6 +31,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import torch
 
+from qdil.config import finished
 from qdil.data import Rollout, TransitionBatch
 from qdil.qd.archives import QD_OFFSETS, qd_metrics
 from qdil.qd.checkpoint import save_checkpoint
@@ -240,22 +241,25 @@ def qd_iteration(run: Run) -> dict[str, float]:
 def _checkpoint_due(run: Run, seconds_since_save: float) -> bool:
     """Whether the iteration just finished ends with a checkpoint.
 
-    Every ``checkpoint_every`` iterations, at the last one, and, when
+    Every ``checkpoint_every`` iterations, at the last one (``qd.iterations`` or the
+    ``qd.env_steps`` budget), and, when
     ``checkpoint_minutes`` is positive, once that much wall time passed since the last save.
     """
     iteration, logging = run.state.iteration, run.logging
-    if iteration % logging.checkpoint_every == 0 or iteration == run.qd.iterations:
+    if iteration % logging.checkpoint_every == 0 or finished(
+        run.qd, iteration, run.state.env_steps
+    ):
         return True
     minutes = logging.checkpoint_minutes
     return minutes > 0 and seconds_since_save >= 60.0 * minutes
 
 
 def run_qd(run: Run) -> None:
-    """Run iterations until ``qd.iterations``, logging and checkpointing as configured."""
+    """Run iterations until ``qd.iterations`` or the env-step budget, log and checkpoint."""
     progress = run.tracker.progress(run.state.iteration, run.qd.iterations)
     saved = time.monotonic()
     try:
-        while run.state.iteration < run.qd.iterations:
+        while not finished(run.qd, run.state.iteration, run.state.env_steps):
             run.state.iteration += 1
             metrics = qd_iteration(run)
             run.tracker.log(metrics, run.state.iteration, run)
