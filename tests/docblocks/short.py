@@ -2,14 +2,14 @@
 
 The docs' commands train for minutes to days. Under the switch (the docs test sets it unless
 it is given as 0), the test's shell runs ``qdil`` through this file, which appends :data:`TINY`
-to every new run: one QD iteration of a handful of simulations on 50-step episodes, the
-sizes of ``recipes/smoke/``. Overrides given later win in the recipe parser, so whatever
-iterations or sizes a command sets, the run stays tiny; everything else of the command (the
-recipe, the reward model and its options, the name, the seed) runs as written, except that a
-model's offline pretraining (:data:`PRETRAINING`) is cut to one pass. A resumed run goes one
-iteration further. Commands that train nothing (``--help``, ``--print_config``,
-``--reward.help``) and the other commands (eval, report, demos, render, rewards) are
-unchanged: their cost follows the tiny run they read.
+to every new run, and to every trial of a ``qdil sweep``: one QD iteration of a handful of
+simulations on 50-step episodes, the sizes of ``recipes/smoke/``. Overrides given later win
+in the recipe parser, so whatever iterations or sizes a command sets, the run stays tiny;
+everything else of the command (the recipe, the reward model and its options, the name, the
+seed) runs as written, except that a model's offline pretraining (:data:`PRETRAINING`) is
+cut to one pass. A resumed run goes one iteration further. Commands that train nothing
+(``--help``, ``--print_config``, ``--reward.help``) and the other commands (eval, report,
+demos, render, rewards) are unchanged: their cost follows the tiny run they read.
 
 Run as ``python short.py ARGS...`` it is the ``qdil`` command with that rewriting.
 """
@@ -69,7 +69,9 @@ def pretraining(fit_argv: list[str]) -> list[str]:
 
 
 def shortened(argv: list[str]) -> list[str]:
-    """The ``qdil`` arguments ``argv`` with a tiny run's overrides appended to a fit."""
+    """The ``qdil`` arguments ``argv`` with a tiny run's overrides appended to a fit or sweep."""
+    if argv and argv[0] == "sweep" and not NOTHING_RUNS.intersection(argv):
+        return [*argv, *TINY]  # every trial a tiny run (a sweep's overrides reach each)
     if not argv or argv[0] != "fit" or NOTHING_RUNS.intersection(argv):
         return argv
     if "--resume" in argv:  # a resumed run does not pretrain again

@@ -13,6 +13,7 @@ from qdil.cli.fit import build, fit, fit_parser, parse_fit
 from qdil.cli.render import render
 from qdil.cli.results import evaluate, report
 from qdil.cli.rewards import rewards
+from qdil.cli.sweep import sweep
 
 __all__ = ["COMMANDS", "build", "fit_parser", "main", "parse_fit"]
 
@@ -20,6 +21,7 @@ __all__ = ["COMMANDS", "build", "fit_parser", "main", "parse_fit"]
 EPILOG = """commands:
   qdil fit RECIPE.yaml [--section.key value ...]   train (recipes: jsonargparse dialect)
   qdil fit --resume RUN_DIR [--qd.iterations N]     continue a run from its checkpoint
+  qdil sweep RECIPE... --seeds S... [overrides]     every recipe × seed as a run, on Ray Tune
   qdil rewards list                                 registered reward models
   qdil eval RUN_DIR                                 re-score an archive on the true reward
   qdil report RUN_DIR... --out DIR                  paper-style tables, tests and figures
@@ -35,6 +37,7 @@ COMMANDS = {
     "eval": evaluate,
     "report": report,
     "render": render,
+    "sweep": sweep,
 }
 
 

@@ -1,0 +1,198 @@
+"""One trial of a sweep, as Ray Tune runs it: ``qdil fit``, then ``qdil eval``, in a child process.
+
+The child is the command a user would type (so a trial equals ``qdil fit`` of its recipe,
+seed and options, bit for bit), with ``--env.num_threads`` set to the trial's CPUs. While it
+runs, each new row of the run's ``metrics.csv`` is reported to Tune. A lock on the run's
+folder (:func:`guard`), held by the trial and its child, keeps any second process out, and
+the child dies with the trial's thread (Linux's parent-death signal), so a killed sweep
+leaves no run going on alone.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import csv
+import ctypes
+import fcntl
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Iterator
+from functools import partial
+from pathlib import Path
+from typing import Any
+
+from qdil.files import CONFIG_NAME
+from qdil.sweeps.trials import Trial
+
+LOCKS = ".locks"
+"""The folder under the runs folder where each run's guard lives (``<name>.lock``)."""
+REPORTED = {
+    "qd/qd_score": "qd_score",
+    "qd/coverage": "coverage",
+    "perf/sps": "env_steps_per_s",
+    "perf/env_steps": "env_steps",
+}
+"""``metrics.csv`` columns a trial reports to Tune, and their names there."""
+
+
+class TrialError(RuntimeError):
+    """A trial's ``qdil`` command failed; the message holds the end of its output."""
+
+
+@contextlib.contextmanager
+def guard(trial: Trial) -> Iterator[int]:
+    """Hold the run folder's lock for as long as the block runs; yields its descriptor.
+
+    Raises:
+        TrialError: another process holds it (another sweep, or a run of the same name).
+    """
+    folder = trial.root / LOCKS
+    folder.mkdir(parents=True, exist_ok=True)
+    fd = os.open(folder / f"{trial.name}.lock", os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        os.close(fd)
+        raise TrialError(
+            f"{trial.run_dir} is being written by another process (its lock "
+            f"{folder / trial.name}.lock is held); wait for it or stop it"
+        ) from None
+    try:
+        yield fd
+    finally:
+        os.close(fd)  # the child, holding a copy, keeps it until it exits
+
+
+def _die_with_parent() -> None:  # pragma: no cover - runs in the child between fork and exec
+    libc = ctypes.CDLL(None, use_errno=True)
+    libc.prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
+
+
+def run_command(args: list[str], lock: int, threads: int, log: Path, cwd: Path) -> None:
+    """``qdil ARGS`` in a child process that holds ``lock`` and dies with this thread.
+
+    It runs in ``cwd`` where that folder exists here (a cluster node without it: in Ray's
+    working folder, where relative paths then fail with the child's own error).
+
+    Raises:
+        TrialError: the command failed, with the end of its output.
+    """
+    env = dict(os.environ, QDIL_NUM_THREADS=str(threads), OMP_NUM_THREADS=str(threads))
+    log.parent.mkdir(parents=True, exist_ok=True)
+    with open(log, "ab") as out:
+        out.write(f"$ qdil {' '.join(args)}\n".encode())
+        out.flush()
+        done = subprocess.run(
+            [sys.executable, "-m", "qdil.cli", *args],
+            stdout=out,
+            stderr=subprocess.STDOUT,
+            env=env,
+            pass_fds=(lock,),
+            cwd=cwd if cwd.is_dir() else None,
+            preexec_fn=_die_with_parent if sys.platform == "linux" else None,
+            check=False,
+        )
+    if done.returncode:
+        tail = log.read_text(errors="replace")[-3000:]
+        raise TrialError(f"qdil {args[0]} exited with {done.returncode}; its output ends:\n{tail}")
+
+
+def follow(metrics: Path, seen: int, report: Callable[[dict[str, Any]], None]) -> int:
+    """Report the rows of ``metrics`` after the first ``seen``; returns the rows read."""
+    if not metrics.is_file():
+        return seen
+    with open(metrics, newline="") as file:
+        rows = list(csv.DictReader(file))
+    for row in rows[seen:]:
+        values = {name: _number(row.get(column)) for column, name in REPORTED.items()}
+        report({"iteration_qd": int(float(row["iteration"])), **values})
+    return max(seen, len(rows))
+
+
+def _number(value: str | None) -> float:
+    try:
+        return float(value) if value not in (None, "") else float("nan")
+    except ValueError:
+        return float("nan")
+
+
+def rescored(run_dir: Path, episodes: int) -> bool:
+    """Whether the run's ``eval.json`` scores its last checkpoint with ``episodes`` episodes."""
+    from qdil.qd.checkpoint import CHECKPOINT, read_checkpoint
+
+    try:
+        summary = json.loads((run_dir / "eval.json").read_text())
+        iteration = read_checkpoint(run_dir / CHECKPOINT)["iteration"]
+    except (OSError, ValueError, KeyError, RuntimeError):
+        return False
+    return summary.get("iteration") == iteration and summary.get("episodes_per_elite") == episodes
+
+
+def run_trial(
+    trial: Trial,
+    threads: int,
+    episodes: int,
+    report: Callable[[dict[str, Any]], None],
+    every: float = 5.0,
+) -> None:
+    """Start or continue the trial's run to its end, then re-score it (``episodes`` > 0).
+
+    Args:
+        trial: the trial.
+        threads: its CPUs: physics threads (``env.num_threads``) and torch's.
+        episodes: re-scoring episodes per elite (0: no re-scoring).
+        report: called with each new iteration's metrics, then with ``done``.
+        every: seconds between two looks at ``metrics.csv``.
+
+    Raises:
+        TrialError: a command failed, or another process holds the run's folder.
+    """
+    log = trial.root / LOCKS / f"{trial.name}.log"
+    metrics = trial.run_dir / "metrics.csv"
+    with guard(trial) as lock:
+        args = ["fit", *trial.fit_args(), "--env.num_threads", str(threads)]
+        # rows a resumed run keeps are not reported again, but the last one is (the table)
+        seen = max(0, _rows(metrics) - 1) if (trial.run_dir / CONFIG_NAME).is_file() else 0
+        work = partial(run_command, args, lock, threads, log, trial.cwd)
+        with _in_background(work) as finished:
+            while not finished():
+                time.sleep(every)
+                seen = follow(metrics, seen, report)
+        seen = follow(metrics, seen, report)
+        if episodes and not rescored(trial.run_dir, episodes):
+            command = ["eval", str(trial.run_dir), "--episodes", str(episodes)]
+            command += ["--num-threads", str(threads)]
+            run_command(command, lock, threads, log, trial.cwd)
+    report({"done": 1.0})
+
+
+def _rows(metrics: Path) -> int:
+    if not metrics.is_file():
+        return 0
+    with open(metrics, newline="") as file:
+        return sum(1 for _ in csv.DictReader(file))
+
+
+@contextlib.contextmanager
+def _in_background(work: Callable[[], None]) -> Iterator[Callable[[], bool]]:
+    """Run ``work`` in a thread; yields whether it finished; re-raises its error after."""
+    import threading
+
+    errors: list[BaseException] = []
+
+    def target() -> None:
+        try:
+            work()
+        except BaseException as error:  # re-raised in the trial's thread
+            errors.append(error)
+
+    thread = threading.Thread(target=target, daemon=True)
+    thread.start()
+    yield lambda: not thread.is_alive()
+    thread.join()
+    if errors:
+        raise errors[0]

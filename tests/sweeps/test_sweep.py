@@ -1,0 +1,125 @@
+"""``qdil sweep``: trials equal plain ``qdil fit`` runs, a killed sweep continues to the same
+end, a bad override stops it before anything starts, and a crashed trial stops no other."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("ray.tune")
+
+import ray
+
+from qdil.cli import main
+from tests.cli.test_reproducible_runs import archives, metrics, same_archives
+
+ROOT = Path(__file__).resolve().parents[2]
+SMOKE = ROOT / "recipes" / "smoke" / "walker_true.yaml"
+IL = ROOT / "recipes" / "smoke" / "walker_il.yaml"
+SEEDS = ("0", "1", "2")
+
+
+@pytest.fixture(scope="module")
+def plain(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """``qdil fit`` of the smoke recipe with each seed, as a user runs them one by one."""
+    root = tmp_path_factory.mktemp("plain")
+    with pytest.MonkeyPatch.context() as patch:
+        patch.chdir(root)
+        patch.delenv("QDIL_PLUGIN_PATH", raising=False)
+        for seed in SEEDS:
+            main(["fit", str(SMOKE), "--seed", seed])
+    return root / "runs"
+
+
+@pytest.fixture(scope="module")
+def one_ray():
+    """One local Ray for the in-process sweeps of this module (2 CPUs: two trials at once)."""
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    yield
+    ray.shutdown()
+
+
+def same_runs(a: Path, b: Path) -> bool:
+    return metrics(a) == metrics(b) and same_archives(archives(a), archives(b))
+
+
+def test_a_sweep_of_three_trials_equals_three_plain_fits(one_ray, plain, tmp_path) -> None:
+    report = tmp_path / "report"
+    args = ["sweep", str(SMOKE), "--seeds", *SEEDS, "--root", str(tmp_path / "runs")]
+    main([*args, "--episodes", "1", "--report", str(report)])
+    for seed in SEEDS:
+        run = tmp_path / "runs" / f"walker_true-seed{seed}"
+        assert same_runs(run, plain / f"walker_true-seed{seed}")
+        assert (run / "eval.json").is_file()  # re-scored
+    assert (report / "report.md").is_file()
+    # the same command again: every trial is finished, nothing is written to its run
+    before = {p: p.stat().st_mtime_ns for p in (tmp_path / "runs").glob("walker_*/**/*")}
+    main([*args, "--episodes", "1"])
+    assert before == {p: p.stat().st_mtime_ns for p in (tmp_path / "runs").glob("walker_*/**/*")}
+
+
+def test_a_bad_override_stops_the_sweep_before_anything_starts(tmp_path: Path) -> None:
+    root = tmp_path / "runs"
+    with pytest.raises(SystemExit, match="itrations"):
+        main(["sweep", str(SMOKE), "--seeds", "0", "--qd.itrations", "5", "--root", str(root)])
+    assert not root.exists()
+
+
+def test_a_crashed_trial_stops_no_other(one_ray, plain, tmp_path, capsys) -> None:
+    root = tmp_path / "runs"
+    broken = tmp_path / "broken.npz"  # read when the imitation run starts, not before
+    broken.write_bytes(b"not an npz file")
+    command = ["sweep", str(SMOKE), str(IL), "--seeds", "0", "--root", str(root)]
+    with pytest.raises(SystemExit, match="1 of 2 trials failed"):
+        main([*command, "--episodes", "0", "--demos.path", str(broken)])
+    (true_run,) = root.glob("walker_true-*-seed0")  # named with the options' hash
+    assert same_runs(true_run, plain / "walker_true-seed0")
+    said = capsys.readouterr().err
+    assert "FAILED walker_il-" in said and "broken.npz" in said
+
+
+def test_a_missing_demonstration_file_stops_the_sweep_before_anything_starts(tmp_path) -> None:
+    root = tmp_path / "runs"
+    command = ["sweep", str(IL), "--seeds", "0", "--root", str(root)]
+    with pytest.raises(SystemExit, match=r"no-such\.npz: no such file"):
+        main([*command, "--demos.path", str(tmp_path / "no-such.npz")])
+    assert not root.exists()
+
+
+def test_a_killed_sweep_run_again_ends_as_an_unbroken_one(plain, tmp_path) -> None:
+    """The driver, Ray and the trials killed at once (SIGKILL to the process group)."""
+    root = tmp_path / "runs"
+    command = [sys.executable, "-m", "qdil.cli", "sweep", str(SMOKE), "--seeds", *SEEDS]
+    command += ["--root", str(root), "--episodes", "0", "--qd.iterations", "3"]
+    env = {k: v for k, v in os.environ.items() if k != "QDIL_PLUGIN_PATH"}
+    sweep = subprocess.Popen(command, env=env, start_new_session=True, cwd=tmp_path,
+                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)  # fmt: skip
+    deadline = time.monotonic() + 300
+    while time.monotonic() < deadline and not list(root.glob("*/checkpoints/last.pt")):
+        time.sleep(0.5)
+    os.killpg(sweep.pid, signal.SIGKILL)
+    sweep.wait()
+    assert list(root.glob("*/checkpoints/last.pt")), "no trial reached a checkpoint"
+    logged = [
+        len(metrics(r)) for r in root.glob("walker_true-seed*") if (r / "metrics.csv").is_file()
+    ]
+    assert min(logged, default=0) < 3 or len(logged) < 3  # killed before the sweep's end
+    done = subprocess.run(command, env=env, cwd=tmp_path, capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr[-3000:]
+    for seed in SEEDS:
+        assert same_runs(root / f"walker_true-seed{seed}", plain / f"walker_true-seed{seed}")
+
+
+def test_sweep_help_lists_its_options() -> None:
+    done = subprocess.run(
+        [sys.executable, "-m", "qdil.cli", "sweep", "--help"], capture_output=True, text=True
+    )
+    assert done.returncode == 0
+    for option in ("--seeds", "--cpus-per-trial", "--gpus-per-trial", "--address", "--report"):
+        assert option in done.stdout
