@@ -196,6 +196,8 @@ class LoggingConfig:
         wandb: ``offline`` (default; no network, sync later with ``wandb sync``),
             ``online``, or ``disabled``.
         wandb_project: W&B project.
+        wandb_group: W&B group of the run (``null``: none; ``qdil sweep`` sets the sweep's
+            name, so that a sweep's runs show together).
         heatmap_every: log an archive heatmap every K iterations (0: never).
         videos: at the end of the run, render this many elites of the deployable archive,
             spread over the measure space, and log their gaits to W&B (0: none; W&B only;
@@ -208,5 +210,6 @@ class LoggingConfig:
     progress: bool = True
     wandb: Literal["offline", "online", "disabled"] = "offline"
     wandb_project: str = "qdil"
+    wandb_group: str | None = None
     heatmap_every: int = 25
     videos: int = 4

@@ -225,6 +225,7 @@ class Tracker:
                 name=name,
                 id=wandb_run_id(run_dir, name),
                 project=logging.wandb_project,
+                group=logging.wandb_group,
                 dir=str(run_dir),
                 mode=logging.wandb,
                 resume="allow",

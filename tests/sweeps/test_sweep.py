@@ -57,6 +57,7 @@ def test_a_sweep_of_three_trials_equals_three_plain_fits(one_ray, plain, tmp_pat
         run = tmp_path / "runs" / f"walker_true-seed{seed}"
         assert same_runs(run, plain / f"walker_true-seed{seed}")
         assert (run / "eval.json").is_file()  # re-scored
+        assert "wandb_group: sweep-" in (run / "config.yaml").read_text()  # W&B groups them
     assert (report / "report.md").is_file()
     # the same command again: every trial is finished, nothing is written to its run
     before = {p: p.stat().st_mtime_ns for p in (tmp_path / "runs").glob("walker_*/**/*")}

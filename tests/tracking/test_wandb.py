@@ -85,6 +85,7 @@ def test_offline_wandb_run_holds_the_metrics_and_a_resume_continues_it(tmp_path:
     # not silenced: the run's output is what a user sees
     env = {k: v for k, v in os.environ.items() if k != "WANDB_SILENT"} | {"WANDB_MODE": "offline"}
     args = ["--logging.wandb", "offline", "--logging.heatmap_every", "2"]
+    args += ["--logging.wandb_group", "sweep-1"]
     done = qdil("fit", str(SMOKE), "--name", "wb", *args, cwd=tmp_path, env=env)
     assert done.returncode == 0, done.stderr[-3000:]
     assert "wandb: WARNING" not in done.stderr + done.stdout, done.stderr
@@ -128,6 +129,7 @@ def test_offline_wandb_run_holds_the_metrics_and_a_resume_continues_it(tmp_path:
     run_dir = tmp_path / "runs" / "wb"
     run_id = (run_dir / "wandb" / "qdil-run-id").read_text().strip()
     assert run_id.startswith("wb-") and run_record(run_file).run_id == run_id
+    assert run_record(run_file).run_group == "sweep-1"  # qdil sweep groups its runs
     more = qdil("fit", "--resume", "runs/wb", "--qd.iterations", "4", cwd=tmp_path, env=env)
     assert more.returncode == 0, more.stderr[-3000:]
     assert "wandb: WARNING" not in more.stderr + more.stdout, more.stderr

@@ -80,12 +80,15 @@ def sweep(argv: list[str]) -> None:
             "(or pip install 'ray[tune]')"
         ) from None
     from qdil.sweeps.driver import Resources, run_sweep
-    from qdil.sweeps.trials import parse_overrides, plan_trials
+    from qdil.sweeps.trials import flat, parse_overrides, plan_trials
 
-    root = args.root.resolve()
-    trials = plan_trials(args.recipes, args.seeds, parse_overrides(rest), root)
-    names = "\n".join(t.name for t in trials)
-    name = args.name or f"sweep-{hashlib.sha256(names.encode()).hexdigest()[:8]}"
+    overrides = parse_overrides(rest)
+    what = [*(str(r.resolve()) for r in args.recipes), *map(str, args.seeds), *flat(overrides)]
+    name = args.name or f"sweep-{hashlib.sha256(chr(10).join(what).encode()).hexdigest()[:8]}"
+    if all(key != "logging.wandb_group" for key, _ in overrides):  # W&B shows them together
+        overrides.append(("logging.wandb_group", name))
+    trials = plan_trials(args.recipes, args.seeds, overrides, args.root)
+    root = trials[0].root
     print(f"qdil sweep {name}: {len(trials)} trials under {root}", file=sys.stderr)
     resources = Resources(args.cpus_per_trial, args.gpus_per_trial, args.address)
     outcome = run_sweep(trials, resources, args.episodes, name)
