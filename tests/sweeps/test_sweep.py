@@ -37,12 +37,18 @@ def plain(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return root / "runs"
 
 
-@pytest.fixture(scope="module")
-def one_ray():
-    """One local Ray for the in-process sweeps of this module (2 CPUs: two trials at once)."""
-    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+@pytest.fixture
+def one_ray() -> None:
+    """A local Ray for in-process sweeps (2 CPUs: two trials at once), started once."""
+    if not ray.is_initialized():
+        ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _ray_down():
     yield
-    ray.shutdown()
+    if ray.is_initialized():
+        ray.shutdown()
 
 
 def same_runs(a: Path, b: Path) -> bool:
@@ -124,3 +130,23 @@ def test_sweep_help_lists_its_options() -> None:
     assert done.returncode == 0
     for option in ("--seeds", "--cpus-per-trial", "--gpus-per-trial", "--address", "--report"):
         assert option in done.stdout
+
+
+def test_a_sweep_on_a_two_node_cluster_equals_the_plain_fits(plain, tmp_path) -> None:
+    """A head and a worker node of one CPU each on this machine, reached by ``--address``."""
+    from ray.cluster_utils import Cluster
+
+    if ray.is_initialized():  # the other tests' local Ray
+        ray.shutdown()
+    cluster = Cluster(initialize_head=True, head_node_args={"num_cpus": 1})
+    cluster.add_node(num_cpus=1)
+    try:
+        root = tmp_path / "runs"
+        command = ["sweep", str(SMOKE), "--seeds", "0", "1", "--root", str(root)]
+        main([*command, "--episodes", "0", "--address", cluster.address])
+        assert not ray.is_initialized()  # the sweep disconnected; the cluster runs on
+        for seed in ("0", "1"):
+            run = root / f"walker_true-seed{seed}"
+            assert same_runs(run, plain / f"walker_true-seed{seed}")
+    finally:
+        cluster.shutdown()
