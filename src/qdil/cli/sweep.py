@@ -91,16 +91,16 @@ def sweep(argv: list[str]) -> None:
     root = trials[0].root
     print(f"qdil sweep {name}: {len(trials)} trials under {root}", file=sys.stderr)
     resources = Resources(args.cpus_per_trial, args.gpus_per_trial, args.address)
-    outcome = run_sweep(trials, resources, args.episodes, name)
+    failed = run_sweep(trials, resources, args.episodes, name)
     if args.report is not None:
         from qdil.evaluation.report import write_report
 
         write_report([t.run_dir for t in trials], args.report)
         print(f"report: {args.report}", file=sys.stderr)
-    for trial_name, error in outcome.failed.items():
+    for trial_name, error in failed.items():
         print(f"FAILED {trial_name}: {error}", file=sys.stderr)
-    if outcome.failed:
+    if failed:
         raise SystemExit(
-            f"qdil sweep: {len(outcome.failed)} of {len(trials)} trials failed (above); the same "
+            f"qdil sweep: {len(failed)} of {len(trials)} trials failed (above); the same "
             "command continues them after a fix"
         )

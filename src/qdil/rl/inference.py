@@ -146,30 +146,32 @@ class RowwisePolicies:
 
     Args:
         sizes: layer widths, observation first, actions last.
-        weights: per layer, (P, out, in) weights (``torch.nn.Linear``'s layout).
-        biases: per layer, (P, out) biases.
-        obs_mean: (P, obs_dim) float32 observation means.
-        obs_scale: (P, obs_dim) float32 observation scales (√(var + ε)).
-        std: (P, A) float32 action standard deviations σ.
+        operands: per layer, the (P, 1, out) bias and (P, in, out) weightᵀ
+            (``VectorizedActor.operands``).
+        obs_mean: (P, 1, obs_dim) float32 observation means.
+        obs_scale: (P, 1, obs_dim) float32 observation scales (√(var + ε)).
+        std: (P, 1, A) float32 action standard deviations σ.
+        two_var: (P, 1, A) 2σ².
+        log_scale: (P, 1, A) log σ.
         obs_clip: bound of normalised observations (``None``: no clipping).
     """
 
     def __init__(
         self,
         sizes: list[int],
-        weights: list[torch.Tensor],
-        biases: list[torch.Tensor],
+        operands: list[tuple[torch.Tensor, torch.Tensor]],
         obs_mean: torch.Tensor,
         obs_scale: torch.Tensor,
         std: torch.Tensor,
+        two_var: torch.Tensor,
+        log_scale: torch.Tensor,
         obs_clip: float | None,
     ) -> None:
-        num = weights[0].shape[0]
+        num = std.shape[0]
         parts, w_at, b_at, offset = [], [], [], 0
-        for weight, bias in zip(weights, biases, strict=True):
+        for bias, weight_t in operands:
             # (in, out) rows: the kernel's inner loop runs over contiguous outputs
-            parts.append(weight.detach().transpose(1, 2).reshape(num, -1))
-            parts.append(bias.detach().reshape(num, -1))
+            parts += [weight_t.detach().reshape(num, -1), bias.detach().reshape(num, -1)]
             w_at.append(offset)
             b_at.append(offset := offset + parts[-2].shape[1])
             offset += parts[-1].shape[1]
@@ -177,11 +179,9 @@ class RowwisePolicies:
         self.params = torch.cat(parts, 1).to(torch.float32).contiguous().numpy()
         self.w_at, self.b_at = np.array(w_at, np.int64), np.array(b_at, np.int64)
         self.sizes = np.array(sizes, np.int64)
-        self.mean = _array(obs_mean)
-        self.scale = _array(obs_scale)
-        self.std = _array(std)
-        self.two_var = _array(2 * std**2)
-        self.log_scale = _array(std.log())
+        self.mean, self.scale = _array(obs_mean.squeeze(1)), _array(obs_scale.squeeze(1))
+        self.std, self.two_var = _array(std.squeeze(1)), _array(two_var.squeeze(1))
+        self.log_scale = _array(log_scale.squeeze(1))
         self.clip = _F4(np.inf if obs_clip is None else obs_clip)
         self._no_noise = np.zeros((0, self.std.shape[1]), _F4)
 

@@ -60,11 +60,12 @@ class PolicySampler:
         if self.std.device.type == "cpu":
             self.rowwise = RowwisePolicies(
                 actor.sizes,
-                list(actor.weights),
-                list(actor.biases),
-                self.obs_mean.squeeze(1),
-                self.obs_scale.squeeze(1),
-                self.std.squeeze(1),
+                self.operands,
+                self.obs_mean,
+                self.obs_scale,
+                self.std,
+                self.two_var,
+                self.log_scale,
                 obs_clip,
             )
 

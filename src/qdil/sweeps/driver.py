@@ -37,14 +37,6 @@ class Resources:
     address: str | None = None
 
 
-@dataclass
-class Outcome:
-    """How a sweep ended: the trials that finished and those that failed, with their errors."""
-
-    finished: list[Trial]
-    failed: dict[str, str]
-
-
 def _trainable(config: dict[str, Any]) -> None:  # pragma: no cover - runs in a Ray worker
     from ray import tune
 
@@ -64,8 +56,8 @@ def _trainable(config: dict[str, Any]) -> None:  # pragma: no cover - runs in a 
 
 def run_sweep(
     trials: list[Trial], resources: Resources, episodes: int, name: str, every: float = 10.0
-) -> Outcome:
-    """Run every trial to its end on Ray Tune; returns which finished and which failed.
+) -> dict[str, str]:
+    """Run every trial to its end on Ray Tune; returns the failed trials' errors by name.
 
     Args:
         trials: the planned trials (:func:`qdil.sweeps.trials.plan_trials`), absolute roots.
@@ -107,13 +99,11 @@ def run_sweep(
     finally:
         if started:
             ray.shutdown()
-    by_name = {t.name: t for t in trials}
-    failed = {}
-    for result in results:
-        trial_name = result.config["trial"]["name"]
-        if result.error is not None:
-            failed[trial_name] = _message(result.error)
-    return Outcome([by_name[n] for n in by_name if n not in failed], failed)
+    return {
+        result.config["trial"]["name"]: _message(result.error)
+        for result in results
+        if result.error is not None
+    }
 
 
 def _message(error: BaseException) -> str:
