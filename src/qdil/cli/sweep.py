@@ -6,6 +6,10 @@ import argparse
 import hashlib
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from qdil.sweeps.search import Search
 
 SWEEP_EPILOG = """Any other --section.key VALUE is a recipe override applied to every trial
 (as qdil fit takes it), e.g. --qd.iterations 50. Each trial is a run directory under --root
@@ -40,6 +44,31 @@ def sweep_parser() -> argparse.ArgumentParser:
     parser.add_argument("--report", type=Path, help="write one qdil report over the runs here")
     parser.add_argument("--root", type=Path, default=Path("runs"), help="the runs folder")
     parser.add_argument("--name", help="the sweep's name (default: from its trials)")
+    search = parser.add_argument_group(
+        "search", "tune recipe options with Optuna (one recipe, one seed); rerun to go on"
+    )
+    search.add_argument("--search", choices=("optuna",), help="search the --space options")
+    search.add_argument(
+        "--space",
+        action="append",
+        default=[],
+        metavar="KEY=RANGE",
+        help="an option and its range: KEY=LOW:HIGH, KEY=log:LOW:HIGH, KEY=int:LOW:HIGH or "
+        "KEY=choice:A,B,C (repeat for more)",
+    )
+    search.add_argument(
+        "--metric", default="coverage", help="what ranks trials: a re-scored archive's "
+        "qd_score, qd_score_offset, coverage, obj_max or obj_mean (default coverage)",
+    )  # fmt: skip
+    search.add_argument("--mode", default="max", choices=("max", "min"))
+    search.add_argument("--samples", type=int, default=20, help="trials to run (default 20)")
+    search.add_argument(
+        "--grace", type=int, default=10, help="iterations before a poor trial may be stopped "
+        "early (ASHA; 0: never stop one)",
+    )  # fmt: skip
+    search.add_argument(
+        "--concurrent", type=int, default=0, help="trials at once (0: as the CPUs allow)"
+    )
     return parser
 
 
@@ -84,18 +113,29 @@ def sweep(argv: list[str]) -> None:
 
     overrides = parse_overrides(rest)
     what = [*(str(r.resolve()) for r in args.recipes), *map(str, args.seeds), *flat(overrides)]
+    what += [*args.space, args.metric, args.mode] if args.search else []
     name = args.name or f"sweep-{hashlib.sha256(chr(10).join(what).encode()).hexdigest()[:8]}"
     if all(key != "logging.wandb_group" for key, _ in overrides):  # W&B shows them together
         overrides.append(("logging.wandb_group", name))
     trials = plan_trials(args.recipes, args.seeds, overrides, args.root)
+    search = plan_search(args, trials, overrides) if args.search or args.space else None
     root = trials[0].root
-    print(f"qdil sweep {name}: {len(trials)} trials under {root}", file=sys.stderr)
+    count = f"{search.samples} trials of a search" if search else f"{len(trials)} trials"
+    print(f"qdil sweep {name}: {count} under {root}", file=sys.stderr)
     resources = Resources(args.cpus_per_trial, args.gpus_per_trial, args.address)
-    failed = run_sweep(trials, resources, args.episodes, name)
+    outcome = run_sweep(trials, resources, args.episodes, name, search)
+    failed = outcome.failed
+    if search is not None:
+        show_ranking(outcome.ranked, search.metric)
     if args.report is not None:
         from qdil.evaluation.report import write_report
 
-        write_report([t.run_dir for t in trials], args.report)
+        runs = (
+            [t.run_dir for t in trials]
+            if search is None
+            else [root / n for n, *_ in outcome.ranked]
+        )
+        write_report(runs, args.report)
         print(f"report: {args.report}", file=sys.stderr)
     for trial_name, error in failed.items():
         print(f"FAILED {trial_name}: {error}", file=sys.stderr)
@@ -103,4 +143,51 @@ def sweep(argv: list[str]) -> None:
         raise SystemExit(
             f"qdil sweep: {len(failed)} of {len(trials)} trials failed (above); the same "
             "command continues them after a fix"
+        )
+
+
+def plan_search(args: argparse.Namespace, trials: list, overrides: list) -> Search:
+    """The search of ``args``, each option's range checked at its ends before anything runs.
+
+    Raises:
+        SystemExit: more than one trial to search from, no re-scoring, a bad range, or a
+            range end that the recipe refuses (naming the key).
+    """
+    from qdil.sweeps.search import Search, parse_domain
+    from qdil.sweeps.trials import plan_trial
+
+    if not args.search or len(trials) != 1 or args.episodes < 1:
+        raise SystemExit(
+            "qdil sweep: a search takes --search optuna with --space ranges, one recipe, one "
+            "seed and --episodes of 1 or more (it ranks trials by their re-scored archives)"
+        )
+    try:
+        import optuna  # noqa: F401
+    except ImportError as error:
+        raise SystemExit(
+            f"qdil sweep --search optuna needs Optuna ({error}); install it with "
+            "pip install 'qdil[sweep]' (or pip install optuna)"
+        ) from None
+    space = tuple(parse_domain(spec) for spec in args.space)
+    trial = trials[0]
+    for domain in space:
+        for end in domain.ends():
+            plan_trial(trial.recipe, trial.seed, [*overrides, (domain.key, end)], trial.root)
+    _, resolved = plan_trial(trial.recipe, trial.seed, overrides, trial.root)
+    iterations = resolved["qd"]["iterations"]
+    return Search(
+        space, args.metric, args.mode, args.samples, args.grace, args.concurrent, iterations
+    )
+
+
+def show_ranking(ranked: list, metric: str) -> None:
+    """Print a search's re-scored trials, best first, with their options."""
+    from qdil.sweeps.search import text
+    from qdil.sweeps.trials import flat
+
+    print(f"re-scored trials by {metric}, best first:", file=sys.stderr)
+    for name, value, options in ranked:
+        print(
+            f"  {value:.6g}  {name}  {' '.join(flat([(k, text(v)) for k, v in options.items()]))}",
+            file=sys.stderr,
         )

@@ -13,11 +13,14 @@ import sys
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from ray.tune import Callback
 
 from qdil.sweeps.trials import Trial
+
+if TYPE_CHECKING:
+    from qdil.sweeps.search import Search
 
 COLUMNS = ("state", "iteration", "QD-Score", "coverage", "env-steps/s")
 
@@ -51,19 +54,48 @@ def _trainable(config: dict[str, Any]) -> None:  # pragma: no cover - runs in a 
         Path(spec["root"]),
         Path(spec["cwd"]),
     )
-    run_trial(trial, config["threads"], config["episodes"], tune.report)
+    if "space" in config:  # a search's trial: the sampled options join the overrides
+        trial = _sampled(trial, config["space"])
+    run_trial(trial, config["threads"], config["episodes"], tune.report, config.get("metric"))
+
+
+def _sampled(trial: Trial, values: dict[str, Any]) -> Trial:
+    """The search's trial with ``values`` of its options, checked and named as planned."""
+    import contextlib
+
+    from qdil.sweeps.search import text
+    from qdil.sweeps.trainable import TrialError
+    from qdil.sweeps.trials import plan_trial
+
+    overrides = [*trial.overrides, *((key, text(value)) for key, value in values.items())]
+    where = contextlib.chdir(trial.cwd) if trial.cwd.is_dir() else contextlib.nullcontext()
+    try:
+        with where:
+            planned, _ = plan_trial(trial.recipe, trial.seed, overrides, trial.root)
+    except SystemExit as error:
+        raise TrialError(str(error)) from None
+    return Trial(
+        planned.recipe, planned.seed, planned.overrides, planned.name, trial.root, trial.cwd
+    )
 
 
 def run_sweep(
-    trials: list[Trial], resources: Resources, episodes: int, name: str, every: float = 10.0
-) -> dict[str, str]:
-    """Run every trial to its end on Ray Tune; returns the failed trials' errors by name.
+    trials: list[Trial],
+    resources: Resources,
+    episodes: int,
+    name: str,
+    search: Search | None = None,
+    every: float = 10.0,
+) -> Outcome:
+    """Run every trial to its end on Ray Tune; returns the failed trials and a search's ranking.
 
     Args:
-        trials: the planned trials (:func:`qdil.sweeps.trials.plan_trials`), absolute roots.
+        trials: the planned trials (:func:`qdil.sweeps.trials.plan_trials`), absolute roots;
+            with a search, the one trial whose options it samples.
         resources: per-trial CPUs and GPUs, and the cluster.
         episodes: re-scoring episodes per elite of each finished trial (0: none).
         name: the sweep's name (Tune's experiment under ``<root>/.tune``).
+        search: sample options of ``trials[0]`` with Optuna (None: run ``trials`` as they are).
         every: seconds between two prints of the trials' table.
     """
     import ray
@@ -77,33 +109,56 @@ def run_sweep(
             {**asdict(t), "recipe": str(t.recipe), "root": str(t.root), "cwd": str(t.cwd)}
             for t in trials
         ]
-        table = ProgressTable([t.name for t in trials], every)
-        tuner = tune.Tuner(
-            tune.with_resources(_trainable, {"cpu": resources.cpus, "gpu": resources.gpus}),
-            param_space={
-                "trial": tune.grid_search(specs),
-                "threads": resources.cpus,
-                "episodes": episodes,
-            },
-            tune_config=tune.TuneConfig(reuse_actors=False),
-            run_config=tune.RunConfig(
-                name=name,
-                storage_path=str(trials[0].root / ".tune"),
-                failure_config=tune.FailureConfig(max_failures=0, fail_fast=False),
-                callbacks=[table],
-                verbose=0,
-            ),
+        names = [t.name for t in trials] if search is None else []
+        table = ProgressTable(names, every, searching=search is not None)
+        trainable = tune.with_resources(_trainable, {"cpu": resources.cpus, "gpu": resources.gpus})
+        space: dict[str, Any] = {"threads": resources.cpus, "episodes": episodes}
+        tune_config = tune.TuneConfig(reuse_actors=False)
+        if search is None:
+            space["trial"] = tune.grid_search(specs)
+        else:
+            space |= {"trial": specs[0], "metric": search.metric}
+            space["space"] = {domain.key: domain.tune() for domain in search.space}
+            tune_config = search.tune_config()
+        storage = trials[0].root / ".tune"
+        run_config = tune.RunConfig(
+            name=name,
+            storage_path=str(storage),
+            failure_config=tune.FailureConfig(max_failures=0, fail_fast=False),
+            callbacks=[table],
+            verbose=0,
         )
+        if search is not None and tune.Tuner.can_restore(storage / name):
+            # a stopped search goes on: Optuna's study and its trials are where they were
+            tuner = tune.Tuner.restore(str(storage / name), trainable, resume_errored=True)
+        else:
+            tuner = tune.Tuner(
+                trainable, param_space=space, tune_config=tune_config, run_config=run_config
+            )
         results = tuner.fit()
         table.show(force=True)
     finally:
         if started:
             ray.shutdown()
-    return {
-        result.config["trial"]["name"]: _message(result.error)
-        for result in results
-        if result.error is not None
-    }
+    failed = {_name(r): _message(r.error) for r in results if r.error is not None}
+    scored = [r for r in results if r.error is None and (r.metrics or {}).get("rescored")]
+    ranked = [(_name(r), r.metrics["objective"], r.config.get("space", {})) for r in scored]
+    if search is not None:
+        ranked.sort(key=lambda row: row[1], reverse=search.mode == "max")
+    return Outcome(failed, ranked)
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """What a sweep ended with.
+
+    Attributes:
+        failed: each failed trial's error, by run name.
+        ranked: a search's re-scored trials, best first: (run name, metric, sampled options).
+    """
+
+    failed: dict[str, str]
+    ranked: list[tuple[str, float, dict[str, Any]]]
 
 
 def _message(error: BaseException) -> str:
@@ -116,52 +171,69 @@ class ProgressTable(Callback):
     """A Tune callback that prints a table of the trials: state, iteration and metrics.
 
     Args:
-        names: the trials' run names, in the sweep's order.
+        names: the trials' run names, in the sweep's order (a search's trials are added as
+            they start, named by their first result).
         every: seconds between two prints (a trial that ends prints at once).
     """
 
-    def __init__(self, names: list[str], every: float) -> None:
+    def __init__(self, names: list[str], every: float, searching: bool = False) -> None:
         self.rows = {name: {"state": "pending"} for name in names}
-        self.every, self.last = every, 0.0
+        self.names: dict[str, str] = {}
+        self.every, self.last, self.searching = every, 0.0, searching
+
+    def _row(self, trial: Any, result: dict | None = None) -> dict[str, str]:
+        planned = trial.config.get("trial", {}).get("name")
+        name = (result or {}).get("run") or self.names.get(trial.trial_id)
+        name = name or (planned if planned in self.rows else f"trial {trial.trial_id}")
+        old = self.names.get(trial.trial_id)
+        if old is not None and old != name and old in self.rows:  # named by its first result
+            self.rows[name] = self.rows.pop(old)
+        self.names[trial.trial_id] = name
+        return self.rows.setdefault(name, {"state": "pending"})
 
     def on_trial_start(self, iteration: int, trials: list, trial: Any, **info: Any) -> None:
         """Mark the trial running."""
-        self.rows[_name(trial)]["state"] = "running"
+        self._row(trial)["state"] = "running"
 
     def on_trial_result(
         self, iteration: int, trials: list, trial: Any, result: dict, **info: Any
     ) -> None:
         """Take the trial's latest iteration's metrics."""
-        row = self.rows[_name(trial)]
-        if "iteration_qd" in result:
+        row = self._row(trial, result)
+        if "qd_score" in result:
             row["iteration"] = f"{result['iteration_qd']}"
             row["QD-Score"] = f"{result['qd_score']:.4g}"
             row["coverage"] = f"{100 * result['coverage']:.2f} %"
             row["env-steps/s"] = f"{result['env_steps_per_s']:,.0f}"
+        if result.get("rescored"):
+            row["re-scored"] = f"{result['objective']:.4g}"
         self.show()
 
     def on_trial_complete(self, iteration: int, trials: list, trial: Any, **info: Any) -> None:
-        """Mark the trial finished and print the table."""
-        self.rows[_name(trial)]["state"] = "finished"
+        """Mark the trial finished (or stopped early) and print the table."""
+        row = self._row(trial)
+        row["state"] = "stopped" if self.searching and "re-scored" not in row else "finished"
         self.show(force=True)
 
     def on_trial_error(self, iteration: int, trials: list, trial: Any, **info: Any) -> None:
         """Mark the trial failed and print the table."""
-        self.rows[_name(trial)]["state"] = "FAILED"
+        self._row(trial)["state"] = "FAILED"
         self.show(force=True)
 
     def show(self, force: bool = False) -> None:
         """Print the table, at most every ``every`` seconds unless ``force``."""
-        if not force and time.monotonic() - self.last < self.every:
+        if not self.rows or (not force and time.monotonic() - self.last < self.every):
             return
         self.last = time.monotonic()
+        columns = COLUMNS + (("re-scored",) if self.searching else ())
         width = max(len(n) for n in self.rows)
-        lines = [f"{'run':<{width}}  " + "  ".join(f"{c:>12}" for c in COLUMNS)]
+        lines = [f"{'run':<{width}}  " + "  ".join(f"{c:>12}" for c in columns)]
         for name, row in self.rows.items():
-            cells = "  ".join(f"{row.get(c, '-'):>12}" for c in COLUMNS)
+            cells = "  ".join(f"{row.get(c, '-'):>12}" for c in columns)
             lines.append(f"{name:<{width}}  {cells}")
         print("\n".join(lines) + "\n", file=sys.stderr, flush=True)
 
 
-def _name(trial: Any) -> str:
-    return trial.config["trial"]["name"]
+def _name(result: Any) -> str:
+    """A finished Tune trial's run name."""
+    return (result.metrics or {}).get("run") or result.config["trial"]["name"]

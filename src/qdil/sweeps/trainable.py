@@ -101,15 +101,23 @@ def run_command(args: list[str], lock: int, threads: int, log: Path, cwd: Path) 
         raise TrialError(f"qdil {args[0]} exited with {done.returncode}; its output ends:\n{tail}")
 
 
-def follow(metrics: Path, seen: int, report: Callable[[dict[str, Any]], None]) -> int:
-    """Report the rows of ``metrics`` after the first ``seen``; returns the rows read."""
+def follow(
+    metrics: Path, seen: int, report: Callable[[dict[str, Any]], None], metric: str | None = None
+) -> int:
+    """Report the rows of ``metrics`` after the first ``seen``; returns the rows read.
+
+    With a search's ``metric``, each row also reports the training archive's value of it
+    as ``objective`` (what early stopping compares).
+    """
     if not metrics.is_file():
         return seen
     with open(metrics, newline="") as file:
         rows = list(csv.DictReader(file))
     for row in rows[seen:]:
         values = {name: _number(row.get(column)) for column, name in REPORTED.items()}
-        report({"iteration_qd": int(float(row["iteration"])), **values})
+        if metric is not None:
+            values["objective"] = _number(row.get(f"qd/{metric}"))
+        report({"iteration_qd": int(float(row["iteration"])), "run": metrics.parent.name, **values})
     return max(seen, len(rows))
 
 
@@ -137,6 +145,7 @@ def run_trial(
     threads: int,
     episodes: int,
     report: Callable[[dict[str, Any]], None],
+    metric: str | None = None,
     every: float = 5.0,
 ) -> None:
     """Start or continue the trial's run to its end, then re-score it (``episodes`` > 0).
@@ -145,7 +154,9 @@ def run_trial(
         trial: the trial.
         threads: its CPUs: physics threads (``env.num_threads``) and torch's.
         episodes: re-scoring episodes per elite (0: no re-scoring).
-        report: called with each new iteration's metrics, then with ``done``.
+        report: called with each new iteration's metrics, then with ``done`` (and, for a
+            search, ``rescored`` and the re-scored ``objective``).
+        metric: a search's metric (:data:`qdil.sweeps.search.METRICS`), or None.
         every: seconds between two looks at ``metrics.csv``.
 
     Raises:
@@ -161,13 +172,21 @@ def run_trial(
         with _in_background(work) as finished:
             while not finished():
                 time.sleep(every)
-                seen = follow(metrics, seen, report)
-        seen = follow(metrics, seen, report)
+                seen = follow(metrics, seen, report, metric)
+        seen = follow(metrics, seen, report, metric)
         if episodes and not rescored(trial.run_dir, episodes):
             command = ["eval", str(trial.run_dir), "--episodes", str(episodes)]
             command += ["--num-threads", str(threads)]
             run_command(command, lock, threads, log, trial.cwd)
-    report({"done": 1.0})
+    report({"done": 1.0, **(_rescored(trial.run_dir, metric) if metric else {})})
+
+
+def _rescored(run_dir: Path, metric: str) -> dict[str, Any]:
+    """A search trial's last result: its re-scored ``objective`` and iteration."""
+    summary = json.loads((run_dir / "eval.json").read_text())
+    objective = float(summary["metrics"][metric])
+    iteration = summary["iteration"]
+    return {"rescored": 1, "objective": objective, "iteration_qd": iteration, "run": run_dir.name}
 
 
 def _rows(metrics: Path) -> int:

@@ -110,29 +110,57 @@ def plan_trials(
         SystemExit: a bad recipe or override (naming the recipe and key), two trials that
             would share a folder, or a folder holding a run of another configuration.
     """
-    from qdil.cli.fit import fit_parser, parse_fit
+    from qdil.cli.fit import fit_parser
 
     parser, trials, configs = fit_parser(), [], {}
-    options = [pair for pair in overrides if not resumable(pair[0])]
-    tag = f"-{_digest(options)}" if options else ""
-    cwd, root = Path.cwd(), root.resolve()
-    for recipe in (r.resolve() for r in recipes):
+    for recipe in recipes:
         for seed in seeds:
-            args = [*flat(overrides), "--seed", str(seed), "--logging.root", str(root)]
-            config, _, stem = parse_fit([str(recipe), *args])
-            _check_demos(recipe, config)
-            name = f"{stem}{tag}-seed{seed}"
-            trial = Trial(recipe, seed, tuple(overrides), name, root, cwd)
-            resolved = yaml.safe_load(parser.dump(_named(config, trial.name), skip_unset=False))
+            trial, resolved = plan_trial(recipe, seed, overrides, root, parser)
             if trial.name in configs and _differences(configs[trial.name], resolved):
                 raise SystemExit(
                     f"qdil sweep: {recipe} and an earlier recipe both run as {trial.name} with "
                     "other settings; give the recipes different file names"
                 )
             configs[trial.name] = resolved
-            _check_folder(trial, resolved)
             trials.append(trial)
     return list(dict((t.name, t) for t in trials).values())
+
+
+def plan_trial(
+    recipe: Path, seed: int, overrides: list[Override], root: Path, parser: Any = None
+) -> tuple[Trial, dict]:
+    """One trial, checked as ``qdil fit`` checks a recipe; returns it and its configuration.
+
+    Raises:
+        SystemExit: a bad recipe or override, a missing demonstration file, or a folder
+            holding a run of another configuration.
+    """
+    from qdil.cli.fit import fit_parser, parse_fit
+
+    parser = parser or fit_parser()
+    recipe, root = recipe.resolve(), root.resolve()
+    args = [*flat(overrides), "--seed", str(seed), "--logging.root", str(root)]
+    config, _, stem = parse_fit([str(recipe), *args])
+    _check_demos(recipe, config)
+    name = trial_name(stem, seed, overrides)
+    trial = Trial(recipe, seed, tuple(overrides), name, root, Path.cwd())
+    resolved = yaml.safe_load(parser.dump(_named(config, name), skip_unset=False))
+    try:  # the components' own checks (VPPO's minimums, say), as qdil fit meets them
+        parser.instantiate(config)
+    except (ValueError, TypeError) as error:
+        raise SystemExit(f"qdil sweep: recipe {recipe}: {error}") from None
+    _check_folder(trial, resolved)
+    return trial, resolved
+
+
+def trial_name(stem: str, seed: int, overrides: list[Override] | tuple[Override, ...]) -> str:
+    """A trial's run name: ``qdil fit``'s, with a hash of the options that change results.
+
+    For example ``walker_ppga-1a2b3c4d-seed0``.
+    """
+    options = [pair for pair in overrides if not resumable(pair[0])]
+    tag = f"-{_digest(options)}" if options else ""
+    return f"{stem}{tag}-seed{seed}"
 
 
 def _check_demos(recipe: Path, config: Any) -> None:

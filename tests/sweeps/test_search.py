@@ -1,0 +1,150 @@
+"""``qdil sweep --search optuna``: ranges are checked before anything runs, every trial is
+the plain ``qdil fit`` of its sampled options, trials are ranked by their re-scored archive,
+a trial stopped early is pruned (never ranked by its training value), and a killed search
+run again goes on where it stopped."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("ray.tune")
+pytest.importorskip("optuna")
+
+import optuna
+import ray
+
+from qdil.cli import main
+from qdil.sweeps.search import Domain, RescoredOptunaSearch, Search, parse_domain
+from tests.cli.test_reproducible_runs import archives, metrics, same_archives
+
+ROOT = Path(__file__).resolve().parents[2]
+SMOKE = ROOT / "recipes" / "smoke" / "walker_true.yaml"
+SPACE = ["--space", "rl.init_args.learning_rate=log:1e-4:1e-2"]
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _ray_down():
+    yield
+    if ray.is_initialized():
+        ray.shutdown()
+
+
+@pytest.mark.parametrize(
+    ("spec", "domain"),
+    [
+        ("a.b=0.1:1", Domain("a.b", "uniform", (0.1, 1.0))),
+        ("a.b=log:1e-4:1e-2", Domain("a.b", "log", (1e-4, 1e-2))),
+        ("a.b=int:2:8", Domain("a.b", "int", (2, 8))),
+        ("a.b=choice:x,y", Domain("a.b", "choice", ("x", "y"))),
+    ],
+)
+def test_ranges_are_read_in_every_form(spec: str, domain: Domain) -> None:
+    assert parse_domain(spec) == domain
+
+
+@pytest.mark.parametrize(
+    ("spec", "said"),
+    [
+        ("a.b", "KEY=LOW:HIGH"),
+        ("a.b=1:x", "KEY=LOW:HIGH"),
+        ("a.b=2:1", "low end must lie below"),
+        ("a.b=log:0:1", "above 0 on a log scale"),
+        ("a.b=choice:x", "two choices"),
+    ],
+)
+def test_a_bad_range_is_refused_naming_it(spec: str, said: str) -> None:
+    with pytest.raises(SystemExit, match=said):
+        parse_domain(spec)
+
+
+def test_a_range_end_the_recipe_refuses_stops_the_search_before_it_starts(tmp_path) -> None:
+    root = tmp_path / "runs"
+    command = ["sweep", str(SMOKE), "--seeds", "0", "--root", str(root), "--search", "optuna"]
+    with pytest.raises(SystemExit, match="num_minibatches"):
+        main([*command, "--space", "rl.init_args.num_minibatches=int:-3:2"])
+    with pytest.raises(SystemExit, match="one recipe, one seed"):
+        main([*command[:3], "0", "1", *command[4:], *SPACE])
+    assert not root.exists()
+
+
+def test_a_trial_stopped_early_is_pruned_not_ranked_by_its_training_value() -> None:
+    from ray import tune
+
+    searcher = RescoredOptunaSearch(space={"x": tune.uniform(0, 1)}, metric="objective", mode="max")
+    for trial_id, result in (("a", {"objective": 0.9}), ("b", {"objective": 0.4, "rescored": 1})):
+        searcher.suggest(trial_id)
+        searcher.on_trial_result(trial_id, {"objective": 0.9, "training_iteration": 1})
+        searcher.on_trial_complete(trial_id, result)
+    stopped, scored = searcher._ot_study.trials
+    assert stopped.state == optuna.trial.TrialState.PRUNED  # TPE ranks it below all complete
+    assert scored.state == optuna.trial.TrialState.COMPLETE and scored.value == 0.4
+    assert searcher._ot_study.best_trial.number == scored.number
+
+
+def test_search_settings_stop_early_only_before_the_budget() -> None:
+    config = Search((parse_domain("a=0:1"),), grace=1, iterations=3).tune_config()
+    assert config.scheduler._max_t == 4  # the last iteration's row goes on to its re-scoring
+    assert type(Search((parse_domain("a=0:1"),), grace=0).tune_config().scheduler).__name__ == (
+        "FIFOScheduler"
+    )
+
+
+def _ranking(said: str) -> list[tuple[float, str, list[str]]]:
+    lines = said.split("best first:\n", 1)[1].splitlines()
+    rows = [line.split() for line in lines if line.startswith("  ")]
+    return [(float(row[0]), row[1], row[2:]) for row in rows]
+
+
+def test_each_trial_equals_the_plain_fit_of_its_options_ranked_by_re_scoring(
+    tmp_path, capsys
+) -> None:
+    root = tmp_path / "runs"
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    main(["sweep", str(SMOKE), "--seeds", "0", "--root", str(root), "--search", "optuna",
+          *SPACE, "--samples", "3", "--grace", "0", "--episodes", "1"])  # fmt: skip
+    ranked = _ranking(capsys.readouterr().err)
+    assert len(ranked) == 3 and [r[0] for r in ranked] == sorted(
+        (r[0] for r in ranked), reverse=True
+    )
+    for value, name, _ in ranked:
+        summary = json.loads((root / name / "eval.json").read_text())
+        assert summary["metrics"]["coverage"] == value
+    value, name, options = ranked[-1]
+    with pytest.MonkeyPatch.context() as patch:
+        patch.chdir(tmp_path)
+        patch.delenv("QDIL_PLUGIN_PATH", raising=False)
+        main(["fit", str(SMOKE), "--seed", "0", *options, "--logging.root", "plain"])
+    plain, trial = tmp_path / "plain" / "walker_true-seed0", root / name
+    assert metrics(plain) == metrics(trial)
+    assert same_archives(archives(plain), archives(trial))
+
+
+def test_a_killed_search_run_again_goes_on_where_it_stopped(tmp_path) -> None:
+    root = tmp_path / "runs"
+    command = [sys.executable, "-m", "qdil.cli", "sweep", str(SMOKE), "--seeds", "0"]
+    command += ["--root", str(root), "--search", "optuna", *SPACE, "--samples", "3"]
+    command += ["--grace", "0", "--episodes", "1", "--concurrent", "1"]
+    env = {k: v for k, v in os.environ.items() if k != "QDIL_PLUGIN_PATH"}
+    search = subprocess.Popen(command, env=env, start_new_session=True, cwd=tmp_path,
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)  # fmt: skip
+    deadline = time.monotonic() + 300
+    while time.monotonic() < deadline and not list(root.glob("*/eval.json")):
+        time.sleep(0.5)
+    os.killpg(search.pid, signal.SIGKILL)
+    search.wait()
+    (first,) = root.glob("*/eval.json")  # one trial, one at a time, re-scored before the kill
+    when = first.stat().st_mtime_ns
+    done = subprocess.run(command, env=env, cwd=tmp_path, capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr[-3000:]
+    runs = sorted(root.glob("walker_true-*-seed0"))
+    assert len(runs) == 3 and all((run / "eval.json").is_file() for run in runs)
+    assert first.stat().st_mtime_ns == when  # the finished trial was not run again
+    assert len(_ranking(done.stderr)) == 3
