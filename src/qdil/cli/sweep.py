@@ -29,20 +29,23 @@ def sweep_parser() -> argparse.ArgumentParser:
         epilog=SWEEP_EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    parser.add_argument("recipes", nargs="+", type=Path, metavar="RECIPE", help="recipe files")
-    parser.add_argument("--seeds", nargs="+", type=int, required=True, help="seeds of each recipe")
     parser.add_argument(
-        "--cpus-per-trial", type=int, default=1, help="CPUs (physics and torch threads) per trial"
+        "recipes", nargs="+", type=Path, metavar="RECIPE",
+        help="recipe files, or one sweep spec (a YAML file of stages: docs/guides/sweeps.md)",
+    )  # fmt: skip
+    parser.add_argument("--seeds", nargs="+", type=int, help="seeds of each recipe")
+    parser.add_argument(
+        "--cpus-per-trial", type=int, help="CPUs (physics and torch threads) per trial (default 1)"
     )
     parser.add_argument(
-        "--gpus-per-trial", type=float, default=0.0, help="GPUs per trial (0.5: two per GPU)"
+        "--gpus-per-trial", type=float, help="GPUs per trial (0.5: two per GPU; default 0)"
     )
     parser.add_argument("--address", help="a Ray cluster's address (default: this machine)")
     parser.add_argument(
-        "--episodes", type=int, default=5, help="re-scoring episodes per elite (0: none)"
+        "--episodes", type=int, help="re-scoring episodes per elite (0: none; default 5)"
     )
     parser.add_argument("--report", type=Path, help="write one qdil report over the runs here")
-    parser.add_argument("--root", type=Path, default=Path("runs"), help="the runs folder")
+    parser.add_argument("--root", type=Path, help="the runs folder (default runs)")
     parser.add_argument("--name", help="the sweep's name (default: from its trials)")
     search = parser.add_argument_group(
         "search", "tune recipe options with Optuna (one recipe, one seed); rerun to go on"
@@ -99,6 +102,17 @@ def sweep(argv: list[str]) -> None:
     parser = sweep_parser()
     mine, rest = split(argv, parser)
     args = parser.parse_args(mine)
+    from qdil.sweeps.spec import is_spec
+
+    spec = len(args.recipes) == 1 and is_spec(args.recipes[0])
+    per_trial = (args.seeds, args.cpus_per_trial, args.gpus_per_trial, args.episodes)
+    if spec and any(value is not None for value in per_trial):
+        parser.error("a sweep spec sets seeds, CPUs, GPUs and episodes in its stages")
+    if not spec and args.seeds is None:
+        parser.error("give --seeds of each recipe (or one sweep spec)")
+    args.cpus_per_trial = 1 if args.cpus_per_trial is None else args.cpus_per_trial
+    args.gpus_per_trial = args.gpus_per_trial or 0.0
+    args.episodes = 5 if args.episodes is None else args.episodes
     if args.cpus_per_trial < 1 or args.gpus_per_trial < 0 or args.episodes < 0:
         parser.error("--cpus-per-trial must be at least 1, --gpus-per-trial and --episodes >= 0")
     try:
@@ -112,6 +126,9 @@ def sweep(argv: list[str]) -> None:
     from qdil.sweeps.trials import flat, parse_overrides, plan_trials
 
     overrides = parse_overrides(rest)
+    if spec:
+        return sweep_spec(args, overrides)
+    args.root = args.root or Path("runs")
     what = [*(str(r.resolve()) for r in args.recipes), *map(str, args.seeds), *flat(overrides)]
     what += [*args.space, args.metric, args.mode] if args.search else []
     name = args.name or f"sweep-{hashlib.sha256(chr(10).join(what).encode()).hexdigest()[:8]}"
@@ -143,6 +160,27 @@ def sweep(argv: list[str]) -> None:
         raise SystemExit(
             f"qdil sweep: {len(failed)} of {len(trials)} trials failed (above); the same "
             "command continues them after a fix"
+        )
+
+
+def sweep_spec(args: argparse.Namespace, overrides: list) -> None:
+    """``qdil sweep SPEC``: plan and check every stage, run them in order, report."""
+    from qdil.sweeps.spec import load_spec, spec_name
+    from qdil.sweeps.stages import run_spec
+
+    name = args.name or spec_name(args.recipes[0])
+    if all(key != "logging.wandb_group" for key, _ in overrides):  # W&B shows them together
+        overrides.append(("logging.wandb_group", name))
+    spec = load_spec(args.recipes[0], overrides, args.root, name)
+    count = sum(len(stage.trials) for stage in spec.stages)
+    print(f"qdil sweep {spec.name}: {len(spec.stages)} stages, {count} trials", file=sys.stderr)
+    failed = run_spec(spec, args.address, args.report)
+    for trial_name, error in failed.items():
+        print(f"FAILED {trial_name}: {error}", file=sys.stderr)
+    if failed:
+        raise SystemExit(
+            f"qdil sweep: {len(failed)} trials failed (above); the same command continues "
+            "the sweep after a fix"
         )
 
 

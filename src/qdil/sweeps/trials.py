@@ -127,9 +127,16 @@ def plan_trials(
 
 
 def plan_trial(
-    recipe: Path, seed: int, overrides: list[Override], root: Path, parser: Any = None
+    recipe: Path,
+    seed: int,
+    overrides: list[Override],
+    root: Path,
+    parser: Any = None,
+    pending: set[Path] | None = None,
 ) -> tuple[Trial, dict]:
     """One trial, checked as ``qdil fit`` checks a recipe; returns it and its configuration.
+
+    ``pending``: demonstration files an earlier stage of the sweep makes (not checked).
 
     Raises:
         SystemExit: a bad recipe or override, a missing demonstration file, or a folder
@@ -141,7 +148,7 @@ def plan_trial(
     recipe, root = recipe.resolve(), root.resolve()
     args = [*flat(overrides), "--seed", str(seed), "--logging.root", str(root)]
     config, _, stem = parse_fit([str(recipe), *args])
-    _check_demos(recipe, config)
+    _check_demos(recipe, config, pending or set())
     name = trial_name(stem, seed, overrides)
     trial = Trial(recipe, seed, tuple(overrides), name, root, Path.cwd())
     resolved = yaml.safe_load(parser.dump(_named(config, name), skip_unset=False))
@@ -163,12 +170,12 @@ def trial_name(stem: str, seed: int, overrides: list[Override] | tuple[Override,
     return f"{stem}{tag}-seed{seed}"
 
 
-def _check_demos(recipe: Path, config: Any) -> None:
+def _check_demos(recipe: Path, config: Any, pending: set[Path]) -> None:
     """Refuse a demonstration file that does not exist (before any trial starts)."""
     from qdil.demos.io import DemoFormatError, resolve_path
 
     path = config.demos.path
-    if path is not None:
+    if path is not None and Path(path).resolve() not in pending:
         try:
             resolve_path(path)
         except DemoFormatError as error:
