@@ -71,6 +71,17 @@ def test_a_sweep_of_three_trials_equals_three_plain_fits(one_ray, plain, tmp_pat
     assert before == {p: p.stat().st_mtime_ns for p in (tmp_path / "runs").glob("walker_*/**/*")}
 
 
+def test_a_trial_with_the_ray_executor_joins_the_sweeps_cluster(one_ray, plain, tmp_path):
+    """Its ``qdil fit`` (executor address null) runs its workers on the sweep's own Ray."""
+    root = tmp_path / "runs"
+    executor = ["--executor", "qdil.executors.RayExecutor", "--executor.init_args.num_workers", "1"]
+    main(["sweep", str(SMOKE), "--seeds", "0", "--root", str(root), "--episodes", "0", *executor])
+    assert same_runs(root / "walker_true-seed0", plain / "walker_true-seed0")
+    log = (root / ".locks" / "walker_true-seed0.log").read_text()
+    address = ray.get_runtime_context().gcs_address
+    assert f"Connecting to existing Ray cluster at address: {address}" in log
+
+
 def test_a_bad_override_stops_the_sweep_before_anything_starts(tmp_path: Path) -> None:
     root = tmp_path / "runs"
     with pytest.raises(SystemExit, match="itrations"):

@@ -42,6 +42,10 @@ def sweep_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--address", help="a Ray cluster's address (default: this machine)")
     parser.add_argument(
+        "--concurrent", type=int, default=0, help="trials at once at most (0: as the CPUs and "
+        "GPUs allow; a trial whose Ray executor asks the cluster for more CPUs needs a cap)",
+    )  # fmt: skip
+    parser.add_argument(
         "--episodes", type=int, help="re-scoring episodes per elite (0: none; default 5)"
     )
     parser.add_argument("--report", type=Path, help="write one qdil report over the runs here")
@@ -69,9 +73,7 @@ def sweep_parser() -> argparse.ArgumentParser:
         "--grace", type=int, default=10, help="iterations before a poor trial may be stopped "
         "early (ASHA; 0: never stop one)",
     )  # fmt: skip
-    search.add_argument(
-        "--concurrent", type=int, default=0, help="trials at once (0: as the CPUs allow)"
-    )
+
     return parser
 
 
@@ -105,11 +107,17 @@ def sweep(argv: list[str]) -> None:
     from qdil.sweeps.spec import is_spec
 
     spec = len(args.recipes) == 1 and is_spec(args.recipes[0])
-    per_trial = (args.seeds, args.cpus_per_trial, args.gpus_per_trial, args.episodes)
-    if spec and any(value is not None for value in per_trial):
-        parser.error("a sweep spec sets seeds, CPUs, GPUs and episodes in its stages")
+    if spec and args.seeds is not None:
+        parser.error("a sweep spec gives each stage's seeds (seeds:); leave out --seeds")
     if not spec and args.seeds is None:
         parser.error("give --seeds of each recipe (or one sweep spec)")
+    given = {  # with a spec: these apply to every stage, over the spec's own
+        key: value
+        for key, value in (("cpus_per_trial", args.cpus_per_trial),
+                           ("gpus_per_trial", args.gpus_per_trial), ("episodes", args.episodes),
+                           ("concurrent", args.concurrent or None))
+        if value is not None
+    }  # fmt: skip
     args.cpus_per_trial = 1 if args.cpus_per_trial is None else args.cpus_per_trial
     args.gpus_per_trial = args.gpus_per_trial or 0.0
     args.episodes = 5 if args.episodes is None else args.episodes
@@ -127,7 +135,7 @@ def sweep(argv: list[str]) -> None:
 
     overrides = parse_overrides(rest)
     if spec:
-        return sweep_spec(args, overrides)
+        return sweep_spec(args, overrides, given)
     args.root = args.root or Path("runs")
     what = [*(str(r.resolve()) for r in args.recipes), *map(str, args.seeds), *flat(overrides)]
     what += [*args.space, args.metric, args.mode] if args.search else []
@@ -139,7 +147,7 @@ def sweep(argv: list[str]) -> None:
     root = trials[0].root
     count = f"{search.samples} trials of a search" if search else f"{len(trials)} trials"
     print(f"qdil sweep {name}: {count} under {root}", file=sys.stderr)
-    resources = Resources(args.cpus_per_trial, args.gpus_per_trial, args.address)
+    resources = Resources(args.cpus_per_trial, args.gpus_per_trial, args.address, args.concurrent)
     outcome = run_sweep(trials, resources, args.episodes, name, search)
     failed = outcome.failed
     if search is not None:
@@ -163,7 +171,7 @@ def sweep(argv: list[str]) -> None:
         )
 
 
-def sweep_spec(args: argparse.Namespace, overrides: list) -> None:
+def sweep_spec(args: argparse.Namespace, overrides: list, given: dict) -> None:
     """``qdil sweep SPEC``: plan and check every stage, run them in order, report."""
     from qdil.sweeps.spec import load_spec, spec_name
     from qdil.sweeps.stages import run_spec
@@ -171,7 +179,7 @@ def sweep_spec(args: argparse.Namespace, overrides: list) -> None:
     name = args.name or spec_name(args.recipes[0])
     if all(key != "logging.wandb_group" for key, _ in overrides):  # W&B shows them together
         overrides.append(("logging.wandb_group", name))
-    spec = load_spec(args.recipes[0], overrides, args.root, name)
+    spec = load_spec(args.recipes[0], overrides, args.root, name, given)
     count = sum(len(stage.trials) for stage in spec.stages)
     print(f"qdil sweep {spec.name}: {len(spec.stages)} stages, {count} trials", file=sys.stderr)
     failed = run_spec(spec, args.address, args.report)

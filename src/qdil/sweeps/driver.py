@@ -33,11 +33,13 @@ class Resources:
         cpus: CPUs per trial (its physics and torch threads).
         gpus: GPUs per trial (fractions pack several trials onto one GPU).
         address: a Ray cluster's address (``None``: Ray on this machine, or ``RAY_ADDRESS``).
+        concurrent: trials at once at most (0: as many as the CPUs and GPUs allow).
     """
 
     cpus: int = 1
     gpus: float = 0.0
     address: str | None = None
+    concurrent: int = 0
 
 
 def _trainable(config: dict[str, Any]) -> None:  # pragma: no cover - runs in a Ray worker
@@ -113,7 +115,9 @@ def run_sweep(
         table = ProgressTable(names, every, searching=search is not None)
         trainable = tune.with_resources(_trainable, {"cpu": resources.cpus, "gpu": resources.gpus})
         space: dict[str, Any] = {"threads": resources.cpus, "episodes": episodes}
-        tune_config = tune.TuneConfig(reuse_actors=False)
+        tune_config = tune.TuneConfig(
+            reuse_actors=False, max_concurrent_trials=resources.concurrent or None
+        )
         if search is None:
             space["trial"] = tune.grid_search(specs)
         else:

@@ -17,7 +17,15 @@ import yaml
 
 from qdil.sweeps.trials import Override, Trial, plan_trial
 
-SPEC_KEYS = ("name", "root", "episodes", "cpus_per_trial", "gpus_per_trial", "overrides")
+SPEC_KEYS = (
+    "name",
+    "root",
+    "episodes",
+    "cpus_per_trial",
+    "gpus_per_trial",
+    "concurrent",
+    "overrides",
+)
 TOP_KEYS = (*SPEC_KEYS, "report", "stages")
 STAGE_KEYS = (*SPEC_KEYS[2:], "name", "recipes", "seeds", "grid", "demos", "report")
 DEMOS_KEYS = ("out", "top", "num", "seed")
@@ -33,6 +41,7 @@ class Stage:
         episodes: re-scoring episodes per elite (0: none).
         cpus: CPUs per trial.
         gpus: GPUs per trial.
+        concurrent: trials at once at most (0: as the CPUs and GPUs allow).
         demos: ``qdil demos`` options (``out``, and ``top``, ``num``, ``seed`` if given)
             made from the stage's one trial once it is re-scored; empty: none.
         report: a ``qdil report`` over the stage's trials, written here (None: none).
@@ -43,6 +52,7 @@ class Stage:
     episodes: int = 5
     cpus: int = 1
     gpus: float = 0.0
+    concurrent: int = 0
     demos: dict[str, Any] = field(default_factory=dict)
     report: Path | None = None
 
@@ -79,7 +89,11 @@ def spec_name(path: Path) -> str:
 
 
 def load_spec(
-    path: Path, extra: list[Override], root: Path | None = None, name: str | None = None
+    path: Path,
+    extra: list[Override],
+    root: Path | None = None,
+    name: str | None = None,
+    given: dict[str, Any] | None = None,
 ) -> Spec:
     """Read, plan and check every stage of the spec at ``path``.
 
@@ -88,6 +102,8 @@ def load_spec(
         extra: recipe overrides from the command line, applied last to every trial.
         root: the runs folder, if the command line gives one (else the spec's, or ``runs``).
         name: the sweep's name (None: the spec's, or its file's stem).
+        given: ``cpus_per_trial``, ``gpus_per_trial`` or ``episodes`` for every stage, over
+            the spec's own (the command line's).
 
     Raises:
         SystemExit: a malformed spec (naming the file and key), or a trial that fails its
@@ -105,7 +121,9 @@ def load_spec(
     stages, planned = [], {}
     for index, raw in enumerate(stages_in):
         _keys(raw, STAGE_KEYS, f"{where}: stages[{index}]")
-        stage = _stage(raw, defaults, extra, root, made, f"{where}: stages[{index}]")
+        stage = _stage(
+            {**raw, **(given or {})}, defaults, extra, root, made, f"{where}: stages[{index}]"
+        )
         names = [s.name for s in stages]
         if stage.name in names:
             raise SystemExit(f"{where}: stages[{index}]: name {stage.name!r} is used twice")
@@ -175,13 +193,18 @@ def _stage(
             )
         made.add(Path(demos["out"]).resolve())
     cpus, gpus = settings.get("cpus_per_trial", 1), settings.get("gpus_per_trial", 0.0)
-    episodes = settings.get("episodes", 5)
-    if not isinstance(cpus, int) or cpus < 1 or not isinstance(episodes, int) or episodes < 0:
-        raise SystemExit(f"{where}: cpus_per_trial must be at least 1 and episodes at least 0")
+    episodes, concurrent = settings.get("episodes", 5), settings.get("concurrent", 0)
+    counts = (cpus - 1, episodes, concurrent)
+    if not all(isinstance(n, int) and n >= 0 for n in counts) or not float(gpus) >= 0:
+        raise SystemExit(
+            f"{where}: cpus_per_trial must be at least 1, and episodes, concurrent and "
+            "gpus_per_trial at least 0"
+        )
     report = raw.get("report")
     return Stage(
-        name, trials, episodes, cpus, float(gpus), dict(demos), Path(report) if report else None
-    )
+        name, trials, episodes, cpus, float(gpus), concurrent, dict(demos),
+        Path(report) if report else None,
+    )  # fmt: skip
 
 
 def _recipe(entry: Any, where: str) -> tuple[str, list[Override]]:

@@ -27,7 +27,7 @@ def run_spec(spec: Spec, address: str | None, report: Path | None = None) -> dic
             f"{len(stage.trials)} trials",
             file=sys.stderr,
         )
-        resources = Resources(stage.cpus, stage.gpus, address)
+        resources = Resources(stage.cpus, stage.gpus, address, stage.concurrent)
         outcome = run_sweep(stage.trials, resources, stage.episodes, f"{spec.name}-{stage.name}")
         if outcome.failed:
             later = [s.name for s in spec.stages[number:]]

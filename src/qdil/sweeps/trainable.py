@@ -82,6 +82,9 @@ def run_command(args: list[str], lock: int, threads: int, log: Path, cwd: Path) 
         TrialError: the command failed, with the end of its output.
     """
     env = dict(os.environ, QDIL_NUM_THREADS=str(threads), OMP_NUM_THREADS=str(threads))
+    address = _cluster_address()
+    if address is not None:  # a trial's Ray executor (address null or auto) joins the sweep's
+        env["RAY_ADDRESS"] = address
     log.parent.mkdir(parents=True, exist_ok=True)
     with open(log, "ab") as out:
         out.write(f"$ qdil {' '.join(args)}\n".encode())
@@ -99,6 +102,16 @@ def run_command(args: list[str], lock: int, threads: int, log: Path, cwd: Path) 
     if done.returncode:
         tail = log.read_text(errors="replace")[-3000:]
         raise TrialError(f"qdil {args[0]} exited with {done.returncode}; its output ends:\n{tail}")
+
+
+def _cluster_address() -> str | None:
+    """The Ray cluster this process is a worker of (None outside Ray)."""
+    try:
+        import ray
+
+        return ray.get_runtime_context().gcs_address if ray.is_initialized() else None
+    except ImportError:
+        return None
 
 
 def follow(
