@@ -2,9 +2,10 @@
 
 The docs' commands train for minutes to days. Under the switch (the docs test sets it unless
 it is given as 0), the test's shell runs ``qdil`` through this file, which appends :data:`TINY`
-to every new run, and to every trial of a ``qdil sweep``: one QD iteration of a handful of
-simulations on 50-step episodes, the sizes of ``recipes/smoke/``. Overrides given later win
-in the recipe parser, so whatever iterations or sizes a command sets, the run stays tiny;
+to every new run, and to every trial of a ``qdil sweep`` (of a search: two trials): one QD
+iteration of a handful of simulations on 50-step episodes, the sizes of ``recipes/smoke/``.
+Overrides given later win in the recipe parser, so whatever iterations or sizes a command
+sets, the run stays tiny;
 everything else of the command (the recipe, the reward model and its options, the name, the
 seed) runs as written, except that a model's offline pretraining (:data:`PRETRAINING`) is
 cut to one pass. A resumed run goes one iteration further. Commands that train nothing
@@ -71,7 +72,8 @@ def pretraining(fit_argv: list[str]) -> list[str]:
 def shortened(argv: list[str]) -> list[str]:
     """The ``qdil`` arguments ``argv`` with a tiny run's overrides appended to a fit or sweep."""
     if argv and argv[0] == "sweep" and not NOTHING_RUNS.intersection(argv):
-        return [*argv, *TINY]  # every trial a tiny run (a sweep's overrides reach each)
+        searched = ["--samples", "2"] if "--search" in argv else []  # two tiny trials
+        return [*argv, *TINY, *searched]  # every trial a tiny run (overrides reach each)
     if not argv or argv[0] != "fit" or NOTHING_RUNS.intersection(argv):
         return argv
     if "--resume" in argv:  # a resumed run does not pretrain again
