@@ -5,10 +5,9 @@ it is given as 0), the test's shell runs ``qdil`` through this file, which appen
 to every new run, and to every trial of a ``qdil sweep`` (of a search: two trials): one QD
 iteration of a handful of simulations on 50-step episodes, the sizes of ``recipes/smoke/``.
 Overrides given later win in the recipe parser, so whatever iterations or sizes a command
-sets, the run stays tiny;
-everything else of the command (the recipe, the reward model and its options, the name, the
-seed) runs as written, except that a model's offline pretraining (:data:`PRETRAINING`) is
-cut to one pass. A resumed run goes one iteration further. Commands that train nothing
+sets, the run stays tiny; everything else of the command (the recipe, the reward model and
+its options, the name, the seed) runs as written, except that a model's offline pretraining
+(:data:`PRETRAINING`) is cut to one pass. A resumed run goes one iteration further. Commands that train nothing
 (``--help``, ``--print_config``, ``--reward.help``) and the other commands (eval, report,
 demos, render, rewards) are unchanged: their cost follows the tiny run they read.
 
