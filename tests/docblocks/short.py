@@ -7,9 +7,10 @@ iteration of a handful of simulations on 50-step episodes, the sizes of ``recipe
 Overrides given later win in the recipe parser, so whatever iterations or sizes a command
 sets, the run stays tiny; everything else of the command (the recipe, the reward model and
 its options, the name, the seed) runs as written, except that a model's offline pretraining
-(:data:`PRETRAINING`) is cut to one pass. A resumed run goes one iteration further. Commands that train nothing
-(``--help``, ``--print_config``, ``--reward.help``) and the other commands (eval, report,
-demos, render, rewards) are unchanged: their cost follows the tiny run they read.
+(:data:`PRETRAINING`) is cut to one pass. A resumed run goes one iteration further.
+Commands that train nothing (``--help``, ``--print_config``, ``--reward.help``) and the
+other commands (eval, report, demos, render, rewards) are unchanged: their cost follows the
+tiny run they read.
 
 Run as ``python short.py ARGS...`` it is the ``qdil`` command with that rewriting.
 """

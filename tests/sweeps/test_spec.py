@@ -130,3 +130,14 @@ def test_every_shipped_spec_plans_and_checks(spec: Path, monkeypatch) -> None:
     monkeypatch.chdir(ROOT)  # their paths are the repository's
     stages = load_spec(spec, [], root=Path("/nonexistent/runs")).stages
     assert stages and all(stage.trials for stage in stages)
+
+
+def test_stages_named_alone_need_what_the_stages_left_out_would_make(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    path = write(tmp_path, TABLE)
+    (expert,) = load_spec(path, [], only=["expert"]).stages
+    assert expert.name == "expert"
+    with pytest.raises(SystemExit, match=r"expert\.npz: no such file"):
+        load_spec(path, [], only=["imitate"])
+    with pytest.raises(SystemExit, match="no stage 'imitation'"):
+        main(["sweep", str(path), "--stages", "imitation"])

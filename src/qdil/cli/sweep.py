@@ -51,6 +51,9 @@ def sweep_parser() -> argparse.ArgumentParser:
     parser.add_argument("--report", type=Path, help="write one qdil report over the runs here")
     parser.add_argument("--root", type=Path, help="the runs folder (default runs)")
     parser.add_argument("--name", help="the sweep's name (default: from its trials)")
+    parser.add_argument(
+        "--stages", nargs="+", metavar="STAGE", help="a spec's stages to run (default: all)"
+    )
     search = parser.add_argument_group(
         "search", "tune recipe options with Optuna (one recipe, one seed); rerun to go on"
     )
@@ -109,8 +112,8 @@ def sweep(argv: list[str]) -> None:
     spec = len(args.recipes) == 1 and is_spec(args.recipes[0])
     if spec and args.seeds is not None:
         parser.error("a sweep spec gives each stage's seeds (seeds:); leave out --seeds")
-    if not spec and args.seeds is None:
-        parser.error("give --seeds of each recipe (or one sweep spec)")
+    if not spec and (args.seeds is None or args.stages):
+        parser.error("give --seeds of each recipe (or one sweep spec, whose --stages you may name)")
     given = {  # with a spec: these apply to every stage, over the spec's own
         key: value
         for key, value in (("cpus_per_trial", args.cpus_per_trial),
@@ -179,7 +182,7 @@ def sweep_spec(args: argparse.Namespace, overrides: list, given: dict) -> None:
     name = args.name or spec_name(args.recipes[0])
     if all(key != "logging.wandb_group" for key, _ in overrides):  # W&B shows them together
         overrides.append(("logging.wandb_group", name))
-    spec = load_spec(args.recipes[0], overrides, args.root, name, given)
+    spec = load_spec(args.recipes[0], overrides, args.root, name, given, args.stages)
     count = sum(len(stage.trials) for stage in spec.stages)
     print(f"qdil sweep {spec.name}: {len(spec.stages)} stages, {count} trials", file=sys.stderr)
     failed = run_spec(spec, args.address, args.report)

@@ -94,6 +94,7 @@ def load_spec(
     root: Path | None = None,
     name: str | None = None,
     given: dict[str, Any] | None = None,
+    only: list[str] | None = None,
 ) -> Spec:
     """Read, plan and check every stage of the spec at ``path``.
 
@@ -104,6 +105,8 @@ def load_spec(
         name: the sweep's name (None: the spec's, or its file's stem).
         given: ``cpus_per_trial``, ``gpus_per_trial`` or ``episodes`` for every stage, over
             the spec's own (the command line's).
+        only: the names of the stages to run (None: all); a stage left out makes nothing,
+            so the files it would make must exist.
 
     Raises:
         SystemExit: a malformed spec (naming the file and key), or a trial that fails its
@@ -119,7 +122,13 @@ def load_spec(
     defaults = {key: content[key] for key in SPEC_KEYS[2:] if key in content}
     made: set[Path] = set()  # demonstrations earlier stages make
     stages, planned = [], {}
+    named = [raw.get("name") if isinstance(raw, dict) else None for raw in stages_in]
+    missing = sorted(set(only or ()) - set(named))
+    if missing:
+        raise SystemExit(f"{where}: no stage {missing[0]!r}; its stages: {named}")
     for index, raw in enumerate(stages_in):
+        if only is not None and named[index] not in only:
+            continue
         _keys(raw, STAGE_KEYS, f"{where}: stages[{index}]")
         stage = _stage(
             {**raw, **(given or {})}, defaults, extra, root, made, f"{where}: stages[{index}]"

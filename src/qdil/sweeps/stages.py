@@ -46,7 +46,7 @@ def run_spec(spec: Spec, address: str | None, report: Path | None = None) -> dic
 
 def make_demos(stage: Stage) -> None:
     """``qdil demos`` from the stage's one trial, unless its file is already written."""
-    from qdil.cli import main
+    import subprocess
 
     options = dict(stage.demos)
     out = Path(options.pop("out"))
@@ -55,7 +55,12 @@ def make_demos(stage: Stage) -> None:
     (trial,) = stage.trials
     args = [f"--{key}={value}" for key, value in options.items()]
     print(f"qdil demos {trial.run_dir} --out {out} {' '.join(args)}", file=sys.stderr)
-    main(["demos", str(trial.run_dir), "--out", str(out), *args])
+    command = [sys.executable, "-m", "qdil.cli", "demos", str(trial.run_dir), "--out", str(out)]
+    if subprocess.run([*command, *args], check=False).returncode:
+        raise SystemExit(
+            f"qdil sweep: stage {stage.name}: qdil demos failed (above); the stages after it "
+            "did not start; the same command continues the sweep after a fix"
+        )
 
 
 def _report(trials: list, out: Path) -> None:
