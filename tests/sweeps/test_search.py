@@ -98,7 +98,7 @@ def test_search_settings_stop_early_only_before_the_budget() -> None:
 
 
 def _ranking(said: str) -> list[tuple[float, str, list[str]]]:
-    lines = said.split("best first:\n", 1)[1].splitlines()
+    lines = said.split("best first (also ", 1)[1].splitlines()[1:]
     rows = [line.split() for line in lines if line.startswith("  ")]
     return [(float(row[0]), row[1], row[2:]) for row in rows]
 
@@ -117,6 +117,9 @@ def test_each_trial_equals_the_plain_fit_of_its_options_ranked_by_re_scoring(
     for value, name, _ in ranked:
         summary = json.loads((root / name / "eval.json").read_text())
         assert summary["metrics"]["coverage"] == value
+    (csv,) = root.glob(".tune/*/ranking.csv")
+    rows = csv.read_text().splitlines()
+    assert rows[0] == "run,coverage,rl.init_args.learning_rate" and len(rows) == 4
     value, name, options = ranked[-1]
     with pytest.MonkeyPatch.context() as patch:
         patch.chdir(tmp_path)

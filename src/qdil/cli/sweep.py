@@ -154,7 +154,7 @@ def sweep(argv: list[str]) -> None:
     outcome = run_sweep(trials, resources, args.episodes, name, search)
     failed = outcome.failed
     if search is not None:
-        show_ranking(outcome.ranked, search.metric)
+        show_ranking(outcome.ranked, search.metric, root / ".tune" / name / "ranking.csv")
     if args.report is not None:
         from qdil.evaluation.report import write_report
 
@@ -229,14 +229,23 @@ def plan_search(args: argparse.Namespace, trials: list, overrides: list) -> Sear
     )
 
 
-def show_ranking(ranked: list, metric: str) -> None:
-    """Print a search's re-scored trials, best first, with their options."""
+def show_ranking(ranked: list, metric: str, path: Path) -> None:
+    """Print a search's re-scored trials, best first, with their options; keep them at ``path``.
+
+    The CSV has one row per trial: ``run``, the metric (re-scored), then each option.
+    """
+    import csv
+
     from qdil.sweeps.search import text
     from qdil.sweeps.trials import flat
 
-    print(f"re-scored trials by {metric}, best first:", file=sys.stderr)
-    for name, value, options in ranked:
-        print(
-            f"  {value:.6g}  {name}  {' '.join(flat([(k, text(v)) for k, v in options.items()]))}",
-            file=sys.stderr,
-        )
+    print(f"re-scored trials by {metric}, best first (also {path}):", file=sys.stderr)
+    keys = sorted({key for *_, options in ranked for key in options})
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "w", newline="") as file:
+        writer = csv.writer(file)
+        writer.writerow(["run", metric, *keys])
+        for name, value, options in ranked:
+            writer.writerow([name, repr(value), *(text(options.get(key, "")) for key in keys)])
+            shown = " ".join(flat([(k, text(v)) for k, v in options.items()]))
+            print(f"  {value:.6g}  {name}  {shown}", file=sys.stderr)
