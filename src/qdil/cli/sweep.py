@@ -17,7 +17,11 @@ named as qdil fit names it (runs/walker_mcwae-seed0), with a short hash of the o
 change what it computes (runs/walker_mcwae-1a2b3c4d-seed0). Every trial is checked before
 anything starts. Running the same command again continues every unfinished run from its
 checkpoint and skips finished ones. Ray starts on this machine unless --address (or
-RAY_ADDRESS) names a cluster."""
+RAY_ADDRESS) names a cluster.
+
+qdil sweep SPEC.yaml runs a sweep spec: stages of recipes x seeds x a grid of options, run
+in order (sweeps/evidence.yaml, sweeps/paper.yaml). --search optuna with --space ranges
+tunes one recipe's options for a re-scored metric. Both: docs/guides/sweeps.md."""
 
 
 def sweep_parser() -> argparse.ArgumentParser:
