@@ -169,13 +169,8 @@ def sweep(argv: list[str]) -> None:
         )
         write_report(runs, args.report)
         print(f"report: {args.report}", file=sys.stderr)
-    for trial_name, error in failed.items():
-        print(f"FAILED {trial_name}: {error}", file=sys.stderr)
-    if failed:
-        raise SystemExit(
-            f"qdil sweep: {len(failed)} of {len(trials)} trials failed (above); the same "
-            "command continues them after a fix"
-        )
+    end(failed, f"{len(failed)} of {len(trials)} trials failed (above); the same command "
+        "continues them after a fix")  # fmt: skip
 
 
 def sweep_spec(args: argparse.Namespace, overrides: list, given: dict) -> None:
@@ -190,13 +185,16 @@ def sweep_spec(args: argparse.Namespace, overrides: list, given: dict) -> None:
     count = sum(len(stage.trials) for stage in spec.stages)
     print(f"qdil sweep {spec.name}: {len(spec.stages)} stages, {count} trials", file=sys.stderr)
     failed = run_spec(spec, args.address, args.report)
+    end(failed, f"{len(failed)} trials failed (above); the same command continues the sweep "
+        "after a fix")  # fmt: skip
+
+
+def end(failed: dict[str, str], summary: str) -> None:
+    """Print each failed trial's error; exit non-zero with ``summary`` if any failed."""
     for trial_name, error in failed.items():
         print(f"FAILED {trial_name}: {error}", file=sys.stderr)
     if failed:
-        raise SystemExit(
-            f"qdil sweep: {len(failed)} trials failed (above); the same command continues "
-            "the sweep after a fix"
-        )
+        raise SystemExit(f"qdil sweep: {summary}")
 
 
 def plan_search(args: argparse.Namespace, trials: list, overrides: list) -> Search:
