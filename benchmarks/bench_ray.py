@@ -28,13 +28,16 @@ import torch
 
 from qdil.envs.vector import LocomotionVectorEnv
 from qdil.executors import LocalExecutor, RayExecutor
+from qdil.qd.scoring import Scorer
+from qdil.qd.vppo import VPPO
+from qdil.rl.networks import VectorizedActor
 from qdil.rl.normalize import RunningMeanStd
-from qdil.rl.vppo import VPPO
+from qdil.run import set_up_policies
 
 
-def iteration(algo: VPPO, args: argparse.Namespace, seed: int) -> int:
+def iteration(algo: VPPO, scorer: Scorer, args: argparse.Namespace, seed: int) -> int:
     """The executor's share of one QD iteration; returns the env steps it simulated."""
-    theta = algo.initial_solution(0)
+    theta = VectorizedActor.initial_solution(algo.obs_dim, algo.action_dim, algo.actor_hidden, 0)
     stats = RunningMeanStd(1, (algo.obs_dim,))
     copies = algo._actor(np.repeat(theta[None], 3, axis=0))
     steps = 0
@@ -47,8 +50,8 @@ def iteration(algo: VPPO, args: argparse.Namespace, seed: int) -> int:
     branches = np.repeat(theta[None], args.branches, axis=0)
     branches += 0.01 * np.random.default_rng(seed).standard_normal(branches.shape)
     many = RunningMeanStd.stack([stats] * args.branches)
-    steps += algo.evaluate(branches.astype(np.float32), many, args.episodes, seed).env_steps
-    steps += algo.evaluate(theta[None], stats, args.branches * args.episodes, seed).env_steps
+    steps += scorer.evaluate(branches.astype(np.float32), many, args.episodes, seed).env_steps
+    steps += scorer.evaluate(theta[None], stats, args.branches * args.episodes, seed).env_steps
     walker = algo._actor(theta[None])
     algo.executor.start(seed + 1)
     for _ in range(args.walk):
@@ -63,14 +66,14 @@ def measure(executor, args: argparse.Namespace) -> tuple[float, int, int]:
     train = LocomotionVectorEnv(args.task, args.num_envs, autoreset_mode="SameStep", **kwargs)
     size = args.branches * args.episodes
     evaluation = LocomotionVectorEnv(args.task, size, autoreset_mode="Disabled", **kwargs)
-    algo.setup(train, evaluation, seed=0, executor=executor)
-    iteration(algo, args, 100)  # warm-up: numba kernels, worker start-up
+    _, scorer, _ = set_up_policies(train, evaluation, algo, executor=executor)
+    iteration(algo, scorer, args, 100)  # warm-up: numba kernels, worker start-up
     sent0 = getattr(executor, "bytes_sent", 0)
     received0 = getattr(executor, "bytes_received", 0)
     best = 0.0
     for r in range(args.repeats):
         tic = time.perf_counter()
-        steps = iteration(algo, args, r)
+        steps = iteration(algo, scorer, args, r)
         best = max(best, steps / (time.perf_counter() - tic))
     sent = (getattr(executor, "bytes_sent", 0) - sent0) // args.repeats
     received = (getattr(executor, "bytes_received", 0) - received0) // args.repeats

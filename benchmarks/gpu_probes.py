@@ -248,6 +248,7 @@ def rollout_syncs(device: str, overrides: list[str], steps: int | None) -> dict[
     import torch
 
     from qdil.cli.fit import build, fit_parser, parse_fit
+    from qdil.rl.networks import VectorizedActor
     from qdil.rl.normalize import RunningMeanStd
 
     with tempfile.TemporaryDirectory() as folder:
@@ -255,9 +256,11 @@ def rollout_syncs(device: str, overrides: list[str], steps: int | None) -> dict[
         config, _, _ = parse_fit(argv)
         config.name = "gpu_check"
         run = build(fit_parser().instantiate(config), "gpu_check", Path(folder), "", resume=False)
-        vppo, collector = run.vppo, run.vppo.executor.collector
+        vppo, collector = run.estimator, run.executor.collector
         steps = steps or vppo.rollout_length
-        actor = vppo._actor(vppo.initial_solution(0)[None].repeat(vppo.num_objectives, 0))
+        dims = (vppo.obs_dim, vppo.action_dim, vppo.actor_hidden)
+        theta = VectorizedActor.initial_solution(*dims, 0)
+        actor = vppo._actor(theta[None].repeat(vppo.num_objectives, 0))
         stats = RunningMeanStd(vppo.num_objectives, (vppo.obs_dim,), device=collector.device)
         collector.start(seed=0)
         # the first rollout records the graphs; the second is the one counted

@@ -139,7 +139,7 @@ def ppga_sections(task: str, paper: bool) -> dict:
     sections = {
         "env": {"task": TASKS[task], "num_envs": 3000 if paper else laptop["num_envs"]},
         "rl": {
-            "class_path": "qdil.rl.VPPO",
+            "class_path": "qdil.qd.VPPO",
             "init_args": {
                 "rollout_length": 128,
                 "jacobian_iterations": 10,

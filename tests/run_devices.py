@@ -42,8 +42,9 @@ def _tensors(name: str, value: object) -> Iterator[tuple[str, torch.Tensor]]:
 
 
 def run_tensors(run: Run) -> dict[str, torch.Tensor]:
-    """Every tensor of a run's torch side: VPPO, its collector, reward model, bonus, demos."""
-    vppo = run.vppo
+    """Every tensor of a run's torch side: VPPO, the scorer, the collector, reward model,
+    bonus, demos."""
+    vppo = run.estimator
     parts = {
         "jacobian_critic": vppo.jacobian_critic,
         "walk_critic": vppo.walk_critic,
@@ -51,15 +52,15 @@ def run_tensors(run: Run) -> dict[str, torch.Tensor]:
         "walk_critic_opt": vppo.walk_critic_opt,
         "jacobian_returns": vppo.jacobian_returns,
         "walk_returns": vppo.walk_returns,
-        "action_map": vars(vppo.action_map),
-        "collector_action_map": vars(vppo.executor.collector.action_map),
+        "action_map": vars(run.scorer.action_map),
+        "collector_action_map": vars(run.executor.collector.action_map),
         "reward": run.reward,
         "expert": {}
         if run.expert is None
         else {f.name: getattr(run.expert, f.name) for f in fields(run.expert)},
     }
     found = {name: t for key, value in parts.items() for name, t in _tensors(key, value)}
-    found["generator"] = torch.empty(0, device=vppo.generator.device)
+    found["generator"] = torch.empty(0, device=run.noise.device)
     return found
 
 

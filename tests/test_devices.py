@@ -13,9 +13,11 @@ import torch
 from run_devices import build, off_device, run_tensors
 
 from qdil.cli import main
+from qdil.config import PolicyConfig
 from qdil.devices import fabric_settings, run_device
 from qdil.envs.vector import LocomotionVectorEnv
-from qdil.rl.vppo import VPPO
+from qdil.executors.local import LocalExecutor
+from qdil.qd.vppo import VPPO
 
 ROOT = Path(__file__).resolve().parents[1]
 SMOKE = ROOT / "recipes" / "smoke" / "walker_true.yaml"
@@ -58,12 +60,14 @@ def test_policies_on_another_device_than_the_physics_are_refused() -> None:
     """VPPO takes the physics' device; environments on two devices are refused."""
     train = LocomotionVectorEnv("Walker2d-v5", 3, autoreset_mode="SameStep")
     evaluation = LocomotionVectorEnv("Walker2d-v5", 3, autoreset_mode="Disabled")
+    executor = LocalExecutor()
+    executor.setup(train, evaluation, 10.0)
     algo = VPPO()
-    algo.setup(train, evaluation, 0)
+    algo.setup(train, executor, PolicyConfig(), torch.Generator().manual_seed(0), 0)
     assert algo.device == train.device == torch.device("cpu")
     evaluation.device = torch.device("meta")
     with pytest.raises(ValueError, match=r"env\.device: the training physics steps on cpu"):
-        VPPO().setup(train, evaluation, 0)
+        LocalExecutor().setup(train, evaluation, 10.0)
 
 
 def test_every_tensor_of_a_run_is_on_its_device(tmp_path, walker_demos) -> None:
@@ -75,7 +79,7 @@ def test_every_tensor_of_a_run_is_on_its_device(tmp_path, walker_demos) -> None:
     assert any(name.startswith("walk_critic.") for name in tensors)
     assert off_device(run, torch.device("cpu")) == []
     # negative control: a stray tensor is reported by name
-    run.vppo.walk_returns = run.vppo.walk_returns.to("meta")
+    run.estimator.walk_returns = run.estimator.walk_returns.to("meta")
     assert off_device(run, torch.device("cpu")) == [
         "walk_returns.mean on meta",
         "walk_returns.var on meta",
@@ -94,8 +98,8 @@ def test_a_recipe_on_a_device_backend_steps_through_the_torch_face(tmp_path) -> 
     from qdil.envs.torch_vector import TorchVectorEnv
 
     on_warp = build(SMOKE, tmp_path / "warp", "--env.backend", "warp")
-    assert isinstance(on_warp.vppo.executor.collector.env, TorchVectorEnv)
-    assert isinstance(on_warp.vppo.executor.eval_face, TorchVectorEnv)
+    assert isinstance(on_warp.executor.collector.env, TorchVectorEnv)
+    assert isinstance(on_warp.executor.eval_face, TorchVectorEnv)
     on_c = build(SMOKE, tmp_path / "c")
-    assert isinstance(on_c.vppo.executor.collector.env, HostFace)
-    assert isinstance(on_c.vppo.executor.eval_face, HostFace)
+    assert isinstance(on_c.executor.collector.env, HostFace)
+    assert isinstance(on_c.executor.eval_face, HostFace)

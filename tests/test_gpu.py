@@ -30,6 +30,7 @@ pytest.importorskip("mujoco_warp", reason="the warp extra is not installed")
 
 from qdil.cli import main  # noqa: E402
 from qdil.envs.torch_vector import TorchVectorEnv  # noqa: E402
+from qdil.rl.networks import VectorizedActor  # noqa: E402
 from qdil.rl.normalize import RunningMeanStd  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -60,13 +61,14 @@ def test_every_tensor_of_a_run_is_on_the_gpu(tmp_path: Path, walker_demos) -> No
     assert off_device(run, torch.device("cuda")) == []
     assert run.fabric.device.type == "cuda"
     assert run.env.physics.torch_exported.device.type == "cuda"
-    assert isinstance(run.vppo.executor.collector.env, TorchVectorEnv)
+    assert isinstance(run.executor.collector.env, TorchVectorEnv)
 
 
 def test_a_rollout_does_not_sync_with_the_host_per_step(tmp_path: Path) -> None:
     run = build(SMOKE, tmp_path / "run", *ON_GPU)
-    vppo, collector = run.vppo, run.vppo.executor.collector
-    actor = vppo._actor(vppo.initial_solution(0)[None].repeat(vppo.num_objectives, 0))
+    vppo, collector = run.estimator, run.executor.collector
+    theta = VectorizedActor.initial_solution(vppo.obs_dim, vppo.action_dim, vppo.actor_hidden, 0)
+    actor = vppo._actor(theta[None].repeat(vppo.num_objectives, 0))
     stats = RunningMeanStd(vppo.num_objectives, (vppo.obs_dim,), device="cuda")
     collector.start(seed=0)
     steps, depth = 64, collector.env.reset_depth

@@ -11,7 +11,7 @@ import pytest
 import yaml
 
 from qdil.cli import fit_parser, parse_fit
-from qdil.rl.vppo import VPPO
+from qdil.qd.vppo import VPPO
 
 ROOT = Path(__file__).resolve().parents[1]
 RECIPES = sorted((ROOT / "recipes").rglob("*.yaml"))

@@ -1,9 +1,10 @@
 """Recipe sections: typed, documented once, validated by jsonargparse.
 
-A recipe is one YAML file with the sections ``seed``, ``name``, ``env``, ``rl``, ``reward``,
-``bonus``, ``demos``, ``qd`` and ``logging``. Classes are chosen with jsonargparse's
+A recipe is one YAML file with the sections ``seed``, ``name``, ``env``, ``policy``, ``rl``,
+``reward``, ``bonus``, ``demos``, ``qd`` and ``logging``. Classes are chosen with jsonargparse's
 ``class_path``/``init_args`` (LightningCLI's dialect): ``rl`` (the gradient estimator),
-``reward`` (a reward model, or its registered name), ``qd.emitter`` and ``qd.scheduler``.
+``reward`` (a reward model, or its registered name), ``qd.emitter`` and ``qd.scheduler``; the
+seats they fill are declared in :mod:`qdil.qd.seats`.
 Every default lives in a signature here or in the chosen class, so it is documented once.
 """
 
@@ -16,8 +17,8 @@ from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 from ribs.archives import ArchiveBase
-from ribs.emitters import EmitterBase
-from ribs.schedulers import Scheduler
+
+from qdil.qd.seats import SearchEmitter, SearchScheduler
 
 if TYPE_CHECKING:
     from qdil.rewards.base import RewardModel
@@ -28,11 +29,28 @@ if TYPE_CHECKING:
 RewardFactory = typing.Callable[[int, int, int], "RewardModel"]
 """A reward model class with its hyperparameters; qdil passes obs_dim, action_dim, k."""
 
-EmitterFactory = Callable[[ArchiveBase, np.ndarray], EmitterBase]
+EmitterFactory = Callable[[ArchiveBase, np.ndarray], SearchEmitter]
 """An emitter class with its hyperparameters; qdil passes the CMA-MAE archive and θ_0."""
 
-SchedulerFactory = Callable[[ArchiveBase, list[EmitterBase]], Scheduler]
-"""A pyribs scheduler class with its options; qdil passes the archive and emitters."""
+SchedulerFactory = Callable[[ArchiveBase, list[SearchEmitter]], SearchScheduler]
+"""A scheduler class with its options (pyribs'); qdil passes the archive and emitters."""
+
+
+@dataclass
+class PolicyConfig:
+    """The policies that the archive's solutions are: their network and its input.
+
+    Every solution is the flat parameter vector of one such policy (an MLP with tanh
+    hidden layers, a Gaussian head and a per-action log standard deviation), run on
+    observations normalised with the policy's own statistics.
+
+    Attributes:
+        hidden: widths of the hidden layers (the paper: 128, 128).
+        obs_clip: bound of normalised observations.
+    """
+
+    hidden: tuple[int, ...] = (128, 128)
+    obs_clip: float = 10.0
 
 
 @dataclass

@@ -18,12 +18,14 @@ from qdil.config import (
     DemoConfig,
     EnvConfig,
     LoggingConfig,
+    PolicyConfig,
     QDConfig,
     RewardFactory,
 )
 from qdil.executors import Executor, LocalExecutor
+from qdil.qd.seats import GradientEstimator, seat_problem
+from qdil.qd.vppo import VPPO
 from qdil.rewards.base import RewardContractError, RewardModel, check_contract
-from qdil.rl.vppo import VPPO
 
 # The smallest value of every integer key that has one. jsonargparse checks the types; these
 # limits are checked after parsing so that a message can name the key and how to set it
@@ -51,28 +53,13 @@ MINIMUMS: dict[str, float] = {
 # Keys whose value is a class (``class_path`` + ``init_args``, or a dotted path).
 CLASS_KEYS = ("reward", "rl", "qd.emitter", "qd.scheduler", "executor")
 
-MOVED_CLASSES = {"qdil.rl.execution.LocalExecutor": "qdil.executors.LocalExecutor"}
-"""Class paths that the recipes of older runs store, and where those classes are now."""
-
-
-def moved_classes(value: Any) -> Any:
-    """A recipe's content with the class paths of :data:`MOVED_CLASSES` replaced.
-
-    A run directory keeps its resolved recipe, with the class path of every section; one
-    written before a class moved still resumes.
-    """
-    if isinstance(value, dict):
-        return {key: moved_classes(item) for key, item in value.items()}
-    if isinstance(value, list):
-        return [moved_classes(item) for item in value]
-    return MOVED_CLASSES.get(value, value) if isinstance(value, str) else value
-
 
 def recipe(
     reward: RewardFactory,
     env: EnvConfig,
     qd: QDConfig,
-    rl: VPPO = lazy_instance(VPPO),  # noqa: B008 - jsonargparse's lazy default
+    policy: PolicyConfig = PolicyConfig(),  # noqa: B008
+    rl: GradientEstimator = lazy_instance(VPPO),  # noqa: B008 - jsonargparse's lazy default
     bonus: BonusConfig = BonusConfig(),  # noqa: B008
     demos: DemoConfig = DemoConfig(),  # noqa: B008
     logging: LoggingConfig = LoggingConfig(),  # noqa: B008
@@ -87,7 +74,9 @@ def recipe(
             ``init_args``.
         env: the task and its simulations.
         qd: archives, emitter, scheduler and evaluation.
-        rl: the gradient estimator (``class_path``: ``qdil.rl.VPPO`` or a subclass).
+        policy: the policies the archive's solutions are (network widths, observation clip).
+        rl: the gradient estimator (``class_path``: ``qdil.qd.VPPO``, or any class with the
+            members of ``qdil.qd.seats.GradientEstimator``).
         bonus: an exploration bonus added to any reward model (``type``: ``single_step``
             or ``ebc``).
         demos: demonstrations for the reward model.
@@ -155,22 +144,38 @@ def _contract_problem(path: str) -> str | None:
 
 
 def class_path_problem(content: dict[str, Any], overrides: list[str]) -> str | None:
-    """Why a class named in the recipe or on the command line cannot be imported, if so.
+    """Why a class named in the recipe or on the command line cannot be used, if so.
 
-    jsonargparse reports a class path in a missing module as a type mismatch of the whole
-    union (eight lines naming ``Callable[...]``); this says which key and which module.
+    jsonargparse reports a class path in a missing module, or a class that does not fill
+    its seat, as a type mismatch of the whole union (eight lines naming ``Callable[...]``);
+    this says which key, and which module or which members are missing.
 
     Args:
         content: the recipe's YAML content.
         overrides: the command-line arguments after the recipe.
 
     Returns:
-        ``"<key>: <what is wrong>"`` for the first class that cannot be imported, or None.
+        ``"<key>: <what is wrong>"`` for the first class that cannot be imported or lacks
+        members of its seat (:mod:`qdil.qd.seats`), or None.
     """
     for key, path in _class_paths(content, overrides):
-        problem = _import_problem(path)
+        problem = _import_problem(path) or seat_problem(key, _imported(path))
         if problem is not None:
             return f"{key}: {problem}"
+    return None
+
+
+def _imported(path: str) -> Any:
+    """The object at the dotted ``path`` (one that :func:`_import_problem` accepted)."""
+    parts = path.split(".")
+    for cut in range(len(parts) - 1, 0, -1):
+        try:
+            obj: Any = importlib.import_module(".".join(parts[:cut]))
+        except ImportError:
+            continue
+        for attr in parts[cut:]:
+            obj = getattr(obj, attr)
+        return obj
     return None
 
 

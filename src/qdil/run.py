@@ -11,21 +11,31 @@ import torch
 from ribs.archives import GridArchive
 from ribs.schedulers import Scheduler
 
-from qdil.config import BonusConfig, DemoConfig, EnvConfig, LoggingConfig, QDConfig, RewardFactory
+from qdil.config import (
+    BonusConfig,
+    DemoConfig,
+    EnvConfig,
+    LoggingConfig,
+    PolicyConfig,
+    QDConfig,
+    RewardFactory,
+)
 from qdil.demos.dataset import DemoSet
 from qdil.demos.io import load_demos
 from qdil.devices import DEVICE_BACKENDS, fabric_settings
 from qdil.envs.vector import LocomotionVectorEnv
 from qdil.executors.base import Executor
+from qdil.executors.local import LocalExecutor
 from qdil.qd.archives import RunArchives, deployable_fields, elite_fields, make_grid
 from qdil.qd.emitter import PPGAEmitter
+from qdil.qd.scoring import Scorer
+from qdil.qd.seats import GradientEstimator, SearchEmitter, SearchScheduler
 from qdil.qd.state import LoopState, Run
 from qdil.rewards.base import RewardModel
 from qdil.rewards.bonus import ExplorationBonus
 from qdil.rewards.ebc import EBCBonus
 from qdil.rl.networks import VectorizedActor
 from qdil.rl.normalize import RunningMeanStd
-from qdil.rl.vppo import VPPO
 from qdil.tracking import Tracker
 
 
@@ -118,8 +128,10 @@ def _archives(qd: QDConfig, solution_dim: int, obs_dim: int, k: int, seed: int) 
 
 def _search(
     qd: QDConfig, main: GridArchive, x0: np.ndarray, obs_dim: int, seed: int
-) -> tuple[PPGAEmitter, Scheduler]:
-    """The PPGA emitter that walks from ``x0`` and the pyribs scheduler over ``main``.
+) -> tuple[SearchEmitter, SearchScheduler]:
+    """The search emitter that walks from ``x0`` and the scheduler over ``main``.
+
+    The recipe schema has checked that the classes fill their seats (:mod:`qdil.qd.seats`).
 
     Args:
         qd: The recipe's ``qd`` section (an emitter or scheduler other than the default).
@@ -127,17 +139,9 @@ def _search(
         x0: The first search policy, a ``(solution_dim,)`` array.
         obs_dim: Observation size: θ's observation statistics start empty.
         seed: The emitter's seed.
-
-    Raises:
-        ValueError: for a ``qd.emitter`` that is not PPGA-style.
     """
     theta_stats = RunningMeanStd(1, (obs_dim,))
     emitter = (PPGAEmitter if qd.emitter is None else qd.emitter)(main, x0, seed=seed)
-    if not hasattr(emitter, "theta_fields"):
-        raise ValueError(
-            "qd.emitter must be a PPGA-style emitter with theta, theta_fields and "
-            "coefficient_mean (e.g. qdil.qd.PPGAEmitter)"
-        )
     emitter.theta_fields = {
         "obs_mean": theta_stats.mean[0].numpy(),
         "obs_var": theta_stats.var[0].numpy(),
@@ -151,7 +155,7 @@ def _search(
     return emitter, scheduler
 
 
-def _eval_size(env: EnvConfig, qd: QDConfig, emitter: PPGAEmitter) -> int:
+def _eval_size(env: EnvConfig, qd: QDConfig, emitter: SearchEmitter) -> int:
     """How many simulations the evaluation environment holds (``env.eval_envs`` if set).
 
     A device scores θ_μ and the branches side by side (fewer steps in sequence); the C
@@ -222,54 +226,86 @@ def _demos(model: RewardModel, demos: DemoConfig, task: str) -> DemoSet | None:
     return load_demos(demos.path, task=task, num_episodes=demos.num_episodes)
 
 
+def set_up_policies(
+    train_env: LocomotionVectorEnv,
+    eval_env: LocomotionVectorEnv,
+    estimator: GradientEstimator,
+    policy: PolicyConfig | None = None,
+    executor: Executor | None = None,
+    seed: int = 0,
+) -> tuple[Executor, Scorer, torch.Generator]:
+    """The executor, scorer and action noise of a run's policies, the estimator bound to them.
+
+    Args:
+        train_env: the estimator's ``SAME_STEP`` simulations.
+        eval_env: the evaluations' ``DISABLED`` simulations, on the same device.
+        estimator: the gradient estimator to set up.
+        policy: the policy family (default: the paper's).
+        executor: who steps the simulations (default: here, :class:`LocalExecutor`).
+        seed: seeds the action noise and the estimator.
+
+    Returns:
+        The executor (set up), the scorer, and the noise generator they share.
+    """
+    policy = PolicyConfig() if policy is None else policy
+    executor = LocalExecutor() if executor is None else executor
+    executor.setup(train_env, eval_env, policy.obs_clip)
+    noise = torch.Generator(device=train_env.device).manual_seed(seed)
+    estimator.setup(train_env, executor, policy, noise, seed)
+    return executor, Scorer(executor, train_env, policy, noise), noise
+
+
 def build_run(
     *,
     name: str,
     run_dir: Path,
     seed: int,
     env: EnvConfig,
-    rl: VPPO,
+    rl: GradientEstimator,
     reward: RewardFactory,
     bonus: BonusConfig,
     demos: DemoConfig,
     qd: QDConfig,
     logging: LoggingConfig,
     config: dict[str, Any],
+    policy: PolicyConfig | None = None,
     resume: bool = False,
     executor: Executor | None = None,
 ) -> Run:
     """Build every component of a run from the instantiated recipe sections.
 
     The steps, in the order their random draws are made: the training environment, the
-    archives, the emitter and scheduler, the evaluation environment and VPPO, the reward
-    model and its demonstrations, the tracker.
+    archives, the emitter and scheduler, the evaluation environment, the executor, the
+    scorer and the gradient estimator, the reward model and its demonstrations, the tracker.
 
+    ``policy`` is the policy family of the archive's solutions (default: the paper's).
     With ``resume``, the reward model's offline pretraining is skipped: the checkpoint
     that :func:`~qdil.qd.checkpoint.load_checkpoint` restores next holds its result.
-    ``executor`` steps VPPO's simulations (default: here, :class:`LocalExecutor`).
+    ``executor`` steps the simulations (default: here, :class:`LocalExecutor`).
 
-    ``env.device`` places the run: the physics, policies, VPPO, the reward model (Fabric's
-    accelerator) and the bonus run there; pyribs and xNES stay on the host.
+    ``env.device`` places the run: the physics, policies, the estimator, the reward model
+    (Fabric's accelerator) and the bonus run there; pyribs and xNES stay on the host.
 
     Raises:
         ValueError: for inconsistent settings, naming the recipe key (``env.device`` for
             a device the run cannot use).
     """
-    _, vppo_seed, emitter_seed, archive_seed, loop_seed, torch_seed, x0_seed = _seeds(seed, 7)
+    _, rl_seed, emitter_seed, archive_seed, loop_seed, torch_seed, x0_seed = _seeds(seed, 7)
     torch.manual_seed(torch_seed)
+    policy = PolicyConfig() if policy is None else policy
 
     train_env = _environment(env, env.num_envs, "SameStep", env.device)
     device = train_env.device  # checked with env.backend before anything was built
     obs_dim = train_env.single_observation_space.shape[0]
     action_dim = train_env.single_action_space.shape[0]
-    solution_dim = VectorizedActor.solution_dim(obs_dim, action_dim, rl.actor_hidden)
+    solution_dim = VectorizedActor.solution_dim(obs_dim, action_dim, policy.hidden)
 
     archives = _archives(qd, solution_dim, obs_dim, train_env.num_feet, archive_seed)
-    x0 = VectorizedActor.initial_solution(obs_dim, action_dim, rl.actor_hidden, x0_seed)
+    x0 = VectorizedActor.initial_solution(obs_dim, action_dim, policy.hidden, x0_seed)
     emitter, scheduler = _search(qd, archives.main, x0, obs_dim, emitter_seed)
 
     eval_env = _environment(env, _eval_size(env, qd, emitter), "Disabled", device)
-    rl.setup(train_env, eval_env, vppo_seed, executor)
+    executor, scorer, noise = set_up_policies(train_env, eval_env, rl, policy, executor, rl_seed)
 
     model, optimizers, fabric = _reward_model(reward, bonus, archives, train_env)
     demo_set = _demos(model, demos, env.task)
@@ -289,7 +325,10 @@ def build_run(
         logging=logging,
         env=train_env,
         eval_env=eval_env,
-        vppo=rl,
+        executor=executor,
+        scorer=scorer,
+        noise=noise,
+        estimator=rl,
         reward=model,
         reward_optimizers=optimizers,
         fabric=fabric,

@@ -7,11 +7,13 @@ from __future__ import annotations
 import csv
 import json
 import pickle
+import shutil
 from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
+import yaml
 
 from qdil.cli import main
 
@@ -55,9 +57,30 @@ def same_archives(a: list[dict[str, np.ndarray]], b: list[dict[str, np.ndarray]]
     )
 
 
+def layout_before_seats(config: dict) -> None:
+    """A resolved recipe as qdil wrote it before the QD seats (issue 48): VPPO under
+    ``qdil.rl`` and the policy's widths and clip among its arguments."""
+    policy = config.pop("policy")
+    config["rl"]["class_path"] = "qdil.rl.VPPO"
+    config["rl"]["init_args"] |= {"actor_hidden": policy["hidden"], "obs_clip": policy["obs_clip"]}
+
+
+def make_older(run_dir: Path) -> None:
+    """Rewrite a run's config.yaml and checkpoint in the layout of before the seats."""
+    config = yaml.safe_load((run_dir / "config.yaml").read_text())
+    layout_before_seats(config)
+    (run_dir / "config.yaml").write_text(yaml.safe_dump(config))
+    path = run_dir / "checkpoints" / "last.pt"
+    state = torch.load(path, weights_only=False)
+    state["vppo"] = {**state.pop("rl"), "generator": state.pop("noise")}
+    layout_before_seats(state["config"])
+    torch.save(state, path)
+
+
 @pytest.fixture(scope="module")
 def runs(walker_demos: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """Three runs of one seed: twice three iterations, and two iterations resumed to three."""
+    """Four runs of one seed: twice three iterations, and two iterations resumed to three,
+    once as they are and once rewritten in the layout of before the seats."""
     root = tmp_path_factory.mktemp("reproducible")
     common = ["fit", str(RECIPE), *LARGER, "--demos.path", str(walker_demos)]
     with pytest.MonkeyPatch.context() as patch:
@@ -66,7 +89,10 @@ def runs(walker_demos: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
         main([*common, "--qd.iterations", "3", "--name", "first"])
         main([*common, "--qd.iterations", "3", "--name", "second"])
         main([*common, "--qd.iterations", "2", "--name", "resumed"])
+        shutil.copytree("runs/resumed", "runs/older")
+        make_older(Path("runs/older"))
         main(["fit", "--resume", "runs/resumed", "--qd.iterations", "3"])
+        main(["fit", "--resume", "runs/older", "--qd.iterations", "3"])
     return root / "runs"
 
 
@@ -82,3 +108,13 @@ def test_a_resumed_run_equals_the_uninterrupted_one(runs: Path) -> None:
     assert same_archives(archives(runs / "resumed"), archives(runs / "first"))
     starts = json.loads((runs / "resumed" / "provenance.json").read_text())
     assert [start["from_iteration"] for start in starts] == [0, 2]
+
+
+def test_a_run_from_before_the_seats_resumes_as_if_never_stopped(runs: Path) -> None:
+    """Its config.yaml names qdil.rl.VPPO and rl.init_args.actor_hidden, its checkpoint keeps
+    the action noise among VPPO's state: read as today's, it continues bit for bit, and the
+    resume writes its config.yaml as today's."""
+    config = yaml.safe_load((runs / "older" / "config.yaml").read_text())
+    assert config["rl"]["class_path"] == "qdil.qd.VPPO" and config["policy"]["hidden"]
+    assert metrics(runs / "older") == metrics(runs / "first")
+    assert same_archives(archives(runs / "older"), archives(runs / "first"))

@@ -93,14 +93,14 @@ def _cells(config: dict) -> None:
 
 
 def _actor_hidden(config: dict) -> None:
-    config["rl"]["init_args"]["actor_hidden"] = [64, 64]
+    config["policy"]["hidden"] = [64, 64]
 
 
 EDITS = {
     "qd.cells": (_cells, False, ["qd.cells: 10 -> 20"]),
-    "actor_hidden": (_actor_hidden, False, ["rl.init_args.actor_hidden: [128, 128] -> [64, 64]"]),
+    "policy.hidden": (_actor_hidden, False, ["policy.hidden: [128, 128] -> [64, 64]"]),
     # a checkpoint of a qdil that did not store the recipe: the policy size still tells
-    "actor_hidden, older checkpoint": (_actor_hidden, True, ["policies of", "actor_hidden"]),
+    "policy.hidden, older checkpoint": (_actor_hidden, True, ["policies of", "policy.hidden"]),
 }
 
 

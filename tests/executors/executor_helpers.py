@@ -11,8 +11,11 @@ import torch
 from qdil.envs.vector import LocomotionVectorEnv
 from qdil.executors.sharded import ShardedExecutor
 from qdil.executors.worker import ShardWorker
+from qdil.qd.scoring import Scorer
+from qdil.qd.vppo import VPPO
+from qdil.rl.networks import VectorizedActor
 from qdil.rl.normalize import RunningMeanStd
-from qdil.rl.vppo import VPPO
+from qdil.run import set_up_policies
 
 
 class _PickledHistoryWorker(ShardWorker):
@@ -42,8 +45,9 @@ class InProcessExecutor(ShardedExecutor):
         self.workers = []
 
 
-def make_vppo(executor: Any, num_envs: int = 12, eval_envs: int = 8) -> VPPO:
-    """VPPO on Walker2d, 12 training simulations (k+1 = 3 blocks of 4), 20-step episodes."""
+def make_vppo(executor: Any, num_envs: int = 12, eval_envs: int = 8) -> tuple[VPPO, Scorer]:
+    """VPPO on Walker2d, 12 training simulations (k+1 = 3 blocks of 4), 20-step episodes,
+    and the scorer of its policies."""
     algo = VPPO(
         rollout_length=16,
         jacobian_iterations=2,
@@ -54,22 +58,24 @@ def make_vppo(executor: Any, num_envs: int = 12, eval_envs: int = 8) -> VPPO:
     kwargs = {"max_episode_steps": 20, "num_threads": 1}
     train = LocomotionVectorEnv("Walker2d-v5", num_envs, autoreset_mode="SameStep", **kwargs)
     evaluation = LocomotionVectorEnv("Walker2d-v5", eval_envs, autoreset_mode="Disabled", **kwargs)
-    algo.setup(train, evaluation, seed=0, executor=executor)
-    return algo
+    _, scorer, _ = set_up_policies(train, evaluation, algo, executor=executor)
+    return algo, scorer
 
 
 def run_phases(executor: Any, num_envs: int = 12) -> list[Any]:
     """Everything an iteration computes with the executor: phases, evaluations, the stream."""
-    algo = make_vppo(executor, num_envs)
-    theta = algo.initial_solution(0)
+    algo, scorer = make_vppo(executor, num_envs)
+    theta = VectorizedActor.initial_solution(17, 6, (128, 128), 0)
     stats = RunningMeanStd(1, (17,))
     out: list[Any] = []
     phase = algo.compute_jacobian(theta, stats, lambda r: 0.5 * r.rewards + r.obs[..., 0], 1)
     out += [phase.solutions, *(r.obs for r in phase.rollouts), phase.diagnostics]
-    learned = algo.evaluate(phase.solutions, phase.stats, 2, 3, lambda r: r.rewards + r.obs[..., 1])
+    learned = scorer.evaluate(
+        phase.solutions, phase.stats, 2, 3, lambda r: r.rewards + r.obs[..., 1]
+    )
     out += [learned.objective, learned.true_objective, learned.measures, learned.lengths]
     out += [learned.env_steps]
-    mean = algo.evaluate(phase.solutions[:1], phase.stats.select([0]), 8, 4, deterministic=True)
+    mean = scorer.evaluate(phase.solutions[:1], phase.stats.select([0]), 8, 4, deterministic=True)
     out += [mean.objective, mean.measures]
     walk = algo.walk(theta, stats, np.array([1.0, 0.5, -0.5]), lambda r: r.rewards, 2)
     out += [walk.solutions, walk.stats.mean, walk.stats.var, walk.diagnostics]

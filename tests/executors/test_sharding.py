@@ -10,6 +10,7 @@ import torch
 from executor_helpers import InProcessExecutor, make_vppo, run_phases, same_outputs
 
 from qdil.executors.shards import shard_bounds
+from qdil.rl.networks import VectorizedActor
 from qdil.rl.normalize import RunningMeanStd
 
 
@@ -37,9 +38,10 @@ def test_the_walk_gives_the_same_bits_with_one_and_two_threads(at_threads) -> No
     """Noise seed 4 made the walk's critic clip its 256 x 256 layer differently on 2 threads."""
 
     def walk() -> list:
-        algo = make_vppo(None)
+        algo, _ = make_vppo(None)
         algo.generator.manual_seed(4)
-        theta, stats = algo.initial_solution(0), RunningMeanStd(1, (17,))
+        theta = VectorizedActor.initial_solution(17, 6, (128, 128), 0)
+        stats = RunningMeanStd(1, (17,))
         phase = algo.walk(theta, stats, np.array([1.0, 0.5, -0.5]), lambda r: r.rewards, 2)
         return [phase.solutions, phase.stats.mean, phase.stats.var, phase.diagnostics]
 

@@ -28,13 +28,15 @@ import torch
 
 from qdil import numerics
 from qdil.cli import main
+from qdil.config import PolicyConfig
 from qdil.envs.faces import torch_face
 from qdil.envs.vector import LocomotionVectorEnv
+from qdil.executors.local import LocalExecutor
+from qdil.qd.vppo import VPPO
 from qdil.rl.collect import Collector
 from qdil.rl.episodes import evaluate_policies
 from qdil.rl.networks import VectorizedActor
 from qdil.rl.normalize import RunningMeanStd
-from qdil.rl.vppo import VPPO
 
 ROOT = Path(__file__).resolve().parents[2]
 SMOKE = ROOT / "recipes" / "smoke"
@@ -175,7 +177,9 @@ def test_vppo_phases_are_pinned() -> None:
     )
     train = LocomotionVectorEnv("Walker2d-v5", 6, max_episode_steps=20, autoreset_mode="SameStep")
     evaluation = LocomotionVectorEnv("Walker2d-v5", 4, autoreset_mode="Disabled")
-    algo.setup(train, evaluation, seed=0)
+    executor = LocalExecutor()
+    executor.setup(train, evaluation, 10.0)
+    algo.setup(train, executor, PolicyConfig(), torch.Generator().manual_seed(0), seed=0)
     theta = policies(1, seed=4)[0]
 
     def reward_fn(rollout):

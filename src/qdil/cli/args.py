@@ -13,7 +13,7 @@ from qdil.files import CONFIG_NAME
 def plain_text(text: str) -> str:
     """Help text from a docstring without its reStructuredText markup.
 
-    ``name`` becomes name, :class:`~qdil.rl.VPPO` becomes VPPO, and a literal-block
+    ``name`` becomes name, :class:`~qdil.qd.VPPO` becomes VPPO, and a literal-block
     marker ``::`` ending a line becomes ``:``.
     """
     text = re.sub(r":[a-z]+:`~?(?:[\w.]+\.)?([\w]+)`", r"\1", text)

@@ -156,8 +156,9 @@ def parse_fit(argv: list[str]) -> tuple[Namespace, Path | None, str]:
     """
     import yaml
 
-    from qdil.recipe import check_values, class_path_problem, moved_classes
+    from qdil.recipe import check_values, class_path_problem
     from qdil.rewards import discover
+    from qdil.upgrades import upgraded
 
     discover()
     resume_dir = None
@@ -190,7 +191,7 @@ def parse_fit(argv: list[str]) -> tuple[Namespace, Path | None, str]:
         raise SystemExit(f"recipe {base} cannot be read: {error}") from None
     if not isinstance(content, dict):
         raise SystemExit(f"recipe {base} must be a mapping of sections (env, reward, rl, qd, ...)")
-    content = moved_classes(content)
+    content = upgraded(content)  # a run's config.yaml from before a class or key moved
     try:
         content = _resolve_reward_names(content)
         overrides = _rewrite_reward_flag(overrides)
@@ -307,7 +308,7 @@ def fit(argv: list[str]) -> None:
             "its last checkpoint (or starts it over if it has none)."
         ) from None
     finally:
-        run.vppo.executor.close()
+        run.executor.close()
     if tracker.wants_videos:
         tracker.log_videos(_render_for_wandb(run_dir, tracker.logging.videos), run.state.iteration)
     tracker.finish(run)
@@ -322,10 +323,12 @@ def _check_unchanged(
     Raises:
         SystemExit: naming the keys that differ and what to do.
     """
+    from qdil.upgrades import upgraded
+
     stored = state.get("config")
     if stored is None:  # written before checkpoints stored their recipe
         return
-    changed = differences(stored, resolved)
+    changed = differences(upgraded(stored), resolved)
     if changed:
         lines = "\n".join(f"  {line}" for line in changed)
         raise SystemExit(
@@ -348,6 +351,7 @@ def build(init: Namespace, name: str, run_dir: Path, resolved: str, *, resume: b
         run_dir=run_dir,
         seed=init.seed,
         env=init.env,
+        policy=init.policy,
         rl=init.rl,
         reward=init.reward,
         bonus=init.bonus,

@@ -24,6 +24,7 @@ from qdil.rl.collect import ActionMap
 from qdil.rl.networks import VectorizedActor
 from qdil.rl.normalize import RunningMeanStd
 from qdil.rl.sampler import act
+from qdil.upgrades import policy_settings
 
 
 def farthest_point_sampling(points: np.ndarray, num: int, start: int = 0) -> np.ndarray:
@@ -185,7 +186,7 @@ def demos_from_run(
     if len(elites["objective"]) == 0:
         raise ValueError(f"{run_dir}: the archive holds no elites yet")
     rows = select_elites(elites, top, num)
-    rl = (config.get("rl") or {}).get("init_args") or {}
+    actor_hidden, obs_clip = policy_settings(config)
     env = config["env"]
     stats = RunningMeanStd.__new__(RunningMeanStd)
     stats.mean = torch.as_tensor(elites["obs_mean"][rows], dtype=torch.float64)
@@ -195,8 +196,8 @@ def demos_from_run(
         env["task"],
         elites["solution"][rows],
         stats,
-        actor_hidden=tuple(rl.get("actor_hidden", (128, 128))),
-        obs_clip=float(rl.get("obs_clip", 10.0)),
+        actor_hidden=actor_hidden,
+        obs_clip=obs_clip,
         seed=seed,
         max_episode_steps=int(env.get("max_episode_steps", 1000)),
         task_kwargs=env.get("task_kwargs") or {},

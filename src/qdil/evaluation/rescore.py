@@ -26,6 +26,7 @@ from qdil.qd.loop import stats_from_fields
 from qdil.rl.episodes import evaluate_policies
 from qdil.rl.networks import VectorizedActor
 from qdil.rl.normalize import RunningMeanStd
+from qdil.upgrades import policy_settings
 
 CORRECTED = "corrected_archive.pkl"
 CORRECTED_DEPLOYABLE = "corrected_deployable.pkl"
@@ -52,15 +53,16 @@ class ReplaySettings:
 
     @classmethod
     def of_run(cls, run_dir: str | Path) -> ReplaySettings:
-        """The settings of the run in ``run_dir`` (its ``env`` and ``rl`` sections)."""
+        """The settings of the run in ``run_dir`` (its ``env`` and ``policy`` sections)."""
         config = yaml.safe_load((Path(run_dir) / CONFIG_NAME).read_text())
-        env, rl = config["env"], (config.get("rl") or {}).get("init_args") or {}
+        env = config["env"]
+        actor_hidden, obs_clip = policy_settings(config)
         return cls(
             task=env["task"],
             max_episode_steps=int(env.get("max_episode_steps", 1000)),
             task_kwargs=env.get("task_kwargs") or {},
-            actor_hidden=tuple(rl.get("actor_hidden", (128, 128))),
-            obs_clip=float(rl.get("obs_clip", 10.0)),
+            actor_hidden=actor_hidden,
+            obs_clip=obs_clip,
         )
 
     def make_env(

@@ -29,6 +29,7 @@ from qdil.files import CONFIG_NAME
 from qdil.provenance import PROVENANCE_JSON, mixed_vendors_note
 from qdil.qd.archives import QD_OFFSETS, qd_metrics, true_keyed
 from qdil.qd.checkpoint import CheckpointError, load_archives
+from qdil.upgrades import upgraded
 
 METRICS_NAME = "metrics.csv"
 
@@ -326,7 +327,8 @@ def load_run(path: Path, label: str | None = None) -> RunResult:
     """
     run = RunResult(path=path)
     try:
-        config = yaml.safe_load((path / CONFIG_NAME).read_text()) or {}
+        # read as today's, so that runs from before a class or key moved pool with later ones
+        config = upgraded(yaml.safe_load((path / CONFIG_NAME).read_text()) or {})
         run.task = config["env"]["task"]
     except (OSError, yaml.YAMLError, KeyError, TypeError) as error:
         run.problems.append(f"{CONFIG_NAME} unreadable or without env.task ({error!r})")

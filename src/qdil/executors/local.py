@@ -31,7 +31,17 @@ class LocalExecutor(Executor):
     def setup(
         self, train_env: LocomotionVectorEnv, eval_env: LocomotionVectorEnv, obs_clip: float
     ) -> None:
-        """Bind the environments' faces; the training one keeps its state across ``collect``."""
+        """Bind the environments' faces; the training one keeps its state across ``collect``.
+
+        Raises:
+            ValueError: if the two environments step on different devices (naming
+                ``env.device``).
+        """
+        if eval_env.device != train_env.device:
+            raise ValueError(
+                f"env.device: the training physics steps on {train_env.device} but the "
+                f"evaluations' on {eval_env.device}; one env.device places both"
+            )
         self.collector = Collector(torch_face(train_env), obs_clip)
         self.eval_face = torch_face(eval_env)
         self.obs_clip = obs_clip

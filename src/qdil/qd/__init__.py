@@ -1,6 +1,7 @@
-"""The quality-diversity side: archives, the PPGA emitter, xNES, the loop, checkpoints."""
+"""The quality-diversity side: the seats, archives, the PPGA emitter, xNES, VPPO, the loop."""
 
 from qdil.qd.emitter import PPGAEmitter
+from qdil.qd.vppo import VPPO
 from qdil.qd.xnes import XNES
 
-__all__ = ["XNES", "PPGAEmitter"]
+__all__ = ["VPPO", "XNES", "PPGAEmitter"]

@@ -143,7 +143,8 @@ def save_checkpoint(run: Run) -> Path:
         "scheduler": dumps_compact(run.scheduler),
         "true_archive": dumps_compact(run.archives.true),
         "deployable_archive": dumps_compact(run.archives.deployable),
-        "vppo": run.vppo.state_dict(),
+        "rl": run.estimator.state_dict(),
+        "noise": run.noise.get_state(),
         "reward": {
             "class": f"{type(reward).__module__}.{type(reward).__qualname__}",
             "state_dict": reward.state_dict(),
@@ -207,7 +208,7 @@ def load_checkpoint(run: Run, state: dict[str, Any] | None = None) -> None:
     if stored_dim != built_dim:  # checkpoints without a stored config reach this
         raise CheckpointError(
             f"{path} holds policies of {stored_dim} parameters; the config builds "
-            f"{built_dim} (was rl.init_args.actor_hidden edited in config.yaml?); restore "
+            f"{built_dim} (was policy.hidden edited in config.yaml?); restore "
             "config.yaml or start a new run with another --name"
         )
     run.state.iteration = state["iteration"]
@@ -228,7 +229,10 @@ def load_checkpoint(run: Run, state: dict[str, Any] | None = None) -> None:
             f"objective): it starts empty at iteration {state['iteration']}",
             file=sys.stderr,
         )
-    run.vppo.load_state_dict(state["vppo"])
+    # checkpoints before the seats (issue 48) kept both under "vppo"
+    estimator_state = state["rl"] if "rl" in state else state["vppo"]
+    run.estimator.load_state_dict(estimator_state)
+    run.noise.set_state(state["noise"] if "noise" in state else estimator_state["generator"])
     run.reward.load_state_dict(state["reward"]["state_dict"])
     for optimizer, opt_state in zip(
         run.reward_optimizers, state["reward"]["optimizers"], strict=True

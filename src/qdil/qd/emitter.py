@@ -85,6 +85,11 @@ class PPGAEmitter(EmitterBase):
         ValueError: for a bad shape, strategy, ranker or rule.
     """
 
+    theta_fields: dict[str, np.ndarray]
+    """Extra archive fields of θ_μ (its observation statistics), which the loop reads and sets."""
+    restarts: int
+    """How many times θ_μ restarted at an elite (or, while the archive is empty, the strategy)."""
+
     def __init__(
         self,
         archive: ArchiveBase,

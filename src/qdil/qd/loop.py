@@ -2,13 +2,15 @@
 
 Each iteration:
 
-1. ``ask_dqd`` gives the search policy θ_μ; VPPO estimates ∇f and ∇m at θ_μ with rewards
-   from the reward model; the emitter proposes λ branches θ_μ + Σ c_j ĝ_j.
-2. θ_μ and the branches are scored (side by side where the executor can: the branches do
-   not depend on θ_μ's score); ``tell_dqd`` inserts θ_μ with its Jacobian, ``ask`` returns
-   the proposed branches, ``tell`` inserts them, ranks the coefficients by archive
-   improvement and adapts xNES (or restarts θ_μ at a random elite when nothing improved).
-3. VPPO walks θ_μ along c_0·r̂ + Σ c_j·δ_j with c the xNES mean.
+1. ``ask_dqd`` gives the search policy θ_μ; the gradient estimator (VPPO) estimates ∇f and
+   ∇m at θ_μ with rewards from the reward model; the emitter proposes λ branches
+   θ_μ + Σ c_j ĝ_j.
+2. The run's scorer plays θ_μ and the branches (side by side where the executor can: the
+   branches do not depend on θ_μ's score); ``tell_dqd`` inserts θ_μ with its Jacobian,
+   ``ask`` returns the proposed branches, ``tell`` inserts them, ranks the coefficients by
+   archive improvement and adapts xNES (or restarts θ_μ at a random elite when nothing
+   improved).
+3. The estimator walks θ_μ along c_0·r̂ + Σ c_j·δ_j with c the xNES mean.
 4. The reward model updates once on expert transitions and this iteration's policy
    transitions (decision D3).
 5. Metrics are logged and, every K iterations, a checkpoint is written.
@@ -79,7 +81,7 @@ def quiet_empty_archive() -> Iterator[None]:
 
 
 class TrainReward:
-    """The per-step rewards VPPO trains on, with a finiteness check and their mean per step.
+    """The per-step rewards the estimator trains on, a finiteness check, their mean per step.
 
     Args:
         run: the run whose reward model scores the rollouts.
@@ -106,7 +108,7 @@ class TrainReward:
 
 
 def reward_functions(run: Run) -> tuple[TrainReward, Any]:
-    """The rewards VPPO trains on and the evaluation's objective, with finiteness checks."""
+    """The rewards the estimator trains on and the evaluation's objective, checked finite."""
     reward = run.reward
 
     def checked(rewards: torch.Tensor) -> torch.Tensor:
@@ -128,7 +130,7 @@ def _objective(run: Run, evaluation: Evaluation) -> np.ndarray:
 
 def qd_iteration(run: Run) -> dict[str, float]:
     """One iteration of Algorithm 1; returns its metrics."""
-    state, vppo, scheduler, emitter = run.state, run.vppo, run.scheduler, run.emitter
+    state, estimator, scheduler, emitter = run.state, run.estimator, run.scheduler, run.emitter
     train_reward, eval_reward = reward_functions(run)
     qd = run.qd
     timings: dict[str, float] = {}
@@ -137,7 +139,7 @@ def qd_iteration(run: Run) -> dict[str, float]:
     # ---- 1. gradients at θ_μ; the branches along them
     theta = scheduler.ask_dqd()[0]
     stats = stats_from_fields(emitter.theta_fields)
-    jacobian_phase = vppo.compute_jacobian(theta, stats, train_reward, state.next_seed())
+    jacobian_phase = estimator.compute_jacobian(theta, stats, train_reward, state.next_seed())
     jacobian = (jacobian_phase.solutions.astype(np.float64) - theta)[None]
     timings["jacobian"] = time.perf_counter() - tic
     branches = emitter.propose(jacobian)  # what scheduler.ask() returns below
@@ -146,7 +148,7 @@ def qd_iteration(run: Run) -> dict[str, float]:
     # ---- 2. score θ_μ and the branches (one batch where the executor can), insert θ_μ,
     # then the branches; rank the coefficients by archive improvement and adapt xNES
     tic_eval = time.perf_counter()
-    mean_eval, evaluation = vppo.evaluate_all(
+    mean_eval, evaluation = run.scorer.evaluate_all(
         [
             (theta[None], stats, qd.mean_episodes, state.next_seed()),
             (branches, branch_stats, qd.branch_episodes, state.next_seed()),
@@ -171,7 +173,7 @@ def qd_iteration(run: Run) -> dict[str, float]:
 
     # ---- 3. walk θ_μ along the coefficient mean
     tic_walk = time.perf_counter()
-    walk = vppo.walk(
+    walk = estimator.walk(
         emitter.theta,
         stats_from_fields(emitter.theta_fields),
         emitter.coefficient_mean,
@@ -190,7 +192,7 @@ def qd_iteration(run: Run) -> dict[str, float]:
     policy = TransitionBatch.cat([r.transitions() for r in walk.rollouts])
     expert = run.expert
     if run.reward.needs_log_probs:  # AIRL: both batches under the walked θ_μ
-        logp = partial(vppo.log_probs, walk.solutions[0], walk.stats)
+        logp = partial(run.scorer.log_probs, walk.solutions[0], walk.stats)
         expert = replace(expert, log_probs=logp(expert.obs, expert.actions))
         policy = replace(policy, log_probs=logp(policy.obs, policy.actions))
     reward_metrics = run.reward.update(expert, policy, state.iteration)
@@ -211,7 +213,7 @@ def qd_iteration(run: Run) -> dict[str, float]:
         }
     metrics |= {f"rl/jacobian_{k}": v for k, v in jacobian_phase.diagnostics.items()}
     metrics |= {f"rl/walk_{k}": v for k, v in walk.diagnostics.items()}
-    returns, _ = vppo.executor.pop_episode_stats()
+    returns, _ = run.executor.pop_episode_stats()
     if returns:
         metrics["rl/train_episode_return"] = float(np.mean(returns))
     metrics |= {f"reward/{k}": float(v) for k, v in reward_metrics.items()}

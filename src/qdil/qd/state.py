@@ -17,16 +17,16 @@ import numpy as np
 if TYPE_CHECKING:
     import lightning as L
     import torch
-    from ribs.emitters import EmitterBase
-    from ribs.schedulers import Scheduler
 
     from qdil.config import LoggingConfig, QDConfig
     from qdil.data import TransitionBatch
     from qdil.demos.dataset import DemoSet
     from qdil.envs.vector import LocomotionVectorEnv
+    from qdil.executors.base import Executor
     from qdil.qd.archives import RunArchives
+    from qdil.qd.scoring import Scorer
+    from qdil.qd.seats import GradientEstimator, SearchEmitter, SearchScheduler
     from qdil.rewards.base import RewardModel
-    from qdil.rl.vppo import VPPO
 
 
 class IterationProgress(Protocol):
@@ -79,12 +79,16 @@ class Run:
     logging: LoggingConfig
     env: LocomotionVectorEnv
     eval_env: LocomotionVectorEnv
-    vppo: VPPO
+    executor: Executor
+    scorer: Scorer
+    noise: torch.Generator
+    """The run's action noise: the estimator's rollouts and the C engine's evaluations."""
+    estimator: GradientEstimator
     reward: RewardModel
     reward_optimizers: list[torch.optim.Optimizer]
     fabric: L.Fabric
-    scheduler: Scheduler
-    emitter: EmitterBase
+    scheduler: SearchScheduler
+    emitter: SearchEmitter
     archives: RunArchives
     demos: DemoSet | None
     expert: TransitionBatch | None

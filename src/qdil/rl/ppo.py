@@ -1,6 +1,6 @@
 """One PPO iteration for P policies side by side: the core that both VPPO phases share.
 
-:class:`~qdil.rl.vppo.VPPO` documents the choices (per-objective value normalisation,
+:class:`~qdil.qd.vppo.VPPO` documents the choices (per-objective value normalisation,
 per-minibatch advantage normalisation, clipped surrogate and value loss, per-policy gradient
 clipping, early stop on the approximate KL); this module holds the update itself and the
 layout helpers between time-major rollouts and per-policy batches.
@@ -23,7 +23,7 @@ from qdil.rl.normalize import RunningMeanStd
 
 @dataclass(frozen=True)
 class PPOSettings:
-    """The hyperparameters one PPO iteration reads (see :class:`~qdil.rl.vppo.VPPO`)."""
+    """The hyperparameters one PPO iteration reads (see :class:`~qdil.qd.vppo.VPPO`)."""
 
     gamma: float
     gae_lambda: float

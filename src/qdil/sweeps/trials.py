@@ -17,6 +17,7 @@ import yaml
 
 from qdil.files import CONFIG_NAME
 from qdil.qd.checkpoint import RESUMABLE_KEYS, config_differences
+from qdil.upgrades import upgraded
 
 Override = tuple[str, str]
 """A recipe override ``(key, value)``: ``--key value`` on the command line."""
@@ -196,7 +197,7 @@ def _check_folder(trial: Trial, resolved: dict) -> None:
     stored_path = trial.run_dir / CONFIG_NAME
     if not stored_path.is_file():
         return
-    stored = yaml.safe_load(stored_path.read_text()) or {}
+    stored = upgraded(yaml.safe_load(stored_path.read_text()) or {})
     changed = config_differences(stored, resolved)
     if changed:
         lines = "\n".join(f"  {line}" for line in changed)

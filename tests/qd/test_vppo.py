@@ -6,16 +6,20 @@ import numpy as np
 import pytest
 import torch
 
+from qdil.config import PolicyConfig
 from qdil.envs.faces import torch_face
 from qdil.envs.vector import LocomotionVectorEnv
+from qdil.executors.local import LocalExecutor
+from qdil.qd.scoring import Scorer
+from qdil.qd.vppo import VPPO
 from qdil.rl.collect import Collector
 from qdil.rl.networks import VectorizedActor
 from qdil.rl.normalize import RunningMeanStd
-from qdil.rl.vppo import VPPO
+from qdil.run import set_up_policies
 
 
 @pytest.fixture(scope="module")
-def vppo() -> VPPO:
+def vppo_scorer() -> tuple[VPPO, Scorer]:
     algo = VPPO(
         rollout_length=16,
         jacobian_iterations=2,
@@ -28,14 +32,26 @@ def vppo() -> VPPO:
     evaluation = LocomotionVectorEnv(
         "Walker2d-v5", 4, max_episode_steps=40, autoreset_mode="Disabled"
     )
-    algo.setup(train, evaluation, seed=0)
-    return algo
+    _, scorer, _ = set_up_policies(train, evaluation, algo)
+    return algo, scorer
+
+
+@pytest.fixture(scope="module")
+def vppo(vppo_scorer) -> VPPO:
+    return vppo_scorer[0]
+
+
+def initial(seed: int) -> np.ndarray:
+    return VectorizedActor.initial_solution(17, 6, (128, 128), seed)
+
+
+SOLUTION_DIM = VectorizedActor.solution_dim(17, 6, (128, 128))
 
 
 def test_jacobian_has_one_row_per_objective_and_leaves_sigma_alone(vppo) -> None:
-    theta = vppo.initial_solution(0)
+    theta = initial(0)
     phase = vppo.compute_jacobian(theta, RunningMeanStd(1, (17,)), lambda r: r.rewards, seed=1)
-    assert phase.solutions.shape == (3, vppo.solution_dim)
+    assert phase.solutions.shape == (3, SOLUTION_DIM)
     jacobian = phase.solutions - theta
     assert np.all(np.linalg.norm(jacobian, axis=1) > 0)
     np.testing.assert_array_equal(jacobian[:, -6:], 0.0)  # log σ is fixed (adaptive_std=False)
@@ -50,25 +66,26 @@ def test_jacobian_has_one_row_per_objective_and_leaves_sigma_alone(vppo) -> None
 
 
 def test_walk_moves_theta_and_updates_its_statistics(vppo) -> None:
-    theta = vppo.initial_solution(0)
+    theta = initial(0)
     stats = RunningMeanStd(1, (17,))
     phase = vppo.walk(theta, stats, np.array([1.0, 0.5, -0.5]), lambda r: r.rewards, seed=2)
-    assert phase.solutions.shape == (1, vppo.solution_dim)
+    assert phase.solutions.shape == (1, SOLUTION_DIM)
     assert not np.allclose(phase.solutions[0], theta)
     assert phase.stats.count[0] > 2 * 16 * 6 - 1 and stats.count[0] < 1  # input untouched
 
 
-def test_evaluation_of_recorded_true_rewards_equals_the_true_return(vppo) -> None:
-    theta = np.stack([vppo.initial_solution(s) for s in (0, 1)])
+def test_evaluation_of_recorded_true_rewards_equals_the_true_return(vppo_scorer) -> None:
+    scorer = vppo_scorer[1]
+    theta = np.stack([initial(s) for s in (0, 1)])
     stats = RunningMeanStd(2, (17,))
-    recorded = vppo.evaluate(theta, stats, 2, seed=3, reward_fn=lambda r: r.rewards)
-    plain = vppo.evaluate(theta, stats, 2, seed=3, deterministic=True)
+    recorded = scorer.evaluate(theta, stats, 2, seed=3, reward_fn=lambda r: r.rewards)
+    plain = scorer.evaluate(theta, stats, 2, seed=3, deterministic=True)
     assert recorded.objective.shape == (2,) and recorded.measures.shape == (2, 2)
     np.testing.assert_allclose(recorded.objective, recorded.true_objective, rtol=1e-5)
     np.testing.assert_array_equal(plain.objective, plain.true_objective)
     assert np.all((recorded.measures >= 0) & (recorded.measures <= 1))
     assert np.all((plain.lengths >= 1) & (plain.lengths <= 40))
-    again = vppo.evaluate(theta, stats, 2, seed=3, deterministic=True)
+    again = scorer.evaluate(theta, stats, 2, seed=3, deterministic=True)
     np.testing.assert_array_equal(again.true_objective, plain.true_objective)
 
 
@@ -103,7 +120,7 @@ def test_ppo_update_moves_the_policy_towards_higher_advantage() -> None:
         adaptive_std=True,
     )
     env = LocomotionVectorEnv("HalfCheetah-v5", 6, autoreset_mode="SameStep")
-    algo.setup(env, LocomotionVectorEnv("HalfCheetah-v5", 1, autoreset_mode="Disabled"), seed=0)
+    set_up_policies(env, LocomotionVectorEnv("HalfCheetah-v5", 1, autoreset_mode="Disabled"), algo)
     actor = VectorizedActor(1, 17, 6)
     actor.set_solutions(VectorizedActor.initial_solution(17, 6, seed=0)[None])
     stats = RunningMeanStd(1, (17,))
@@ -126,7 +143,7 @@ def test_num_envs_must_split_among_copies() -> None:
     algo = VPPO()
     env = LocomotionVectorEnv("Walker2d-v5", 4, autoreset_mode="SameStep")
     with pytest.raises(ValueError, match="divisible by k\\+1=3"):
-        algo.setup(env, env, seed=0)
+        algo.setup(env, LocalExecutor(), PolicyConfig(), torch.Generator(), seed=0)
 
 
 @pytest.mark.parametrize("update_stats", [False, True])

@@ -2,52 +2,37 @@
 
 Reads top to bottom (CleanRL style): :meth:`VPPO.compute_jacobian` trains k+1 copies of
 θ_μ side by side, :meth:`VPPO.walk` moves θ_μ, both with the same PPO update
-(:func:`qdil.rl.ppo.ppo_update`); an executor steps the simulations. Why each detail is as
-it is: ``docs/concepts/vppo.md``.
+(:func:`qdil.rl.ppo.ppo_update`); the run's executor steps the simulations. It fills the
+loop's :class:`~qdil.qd.seats.GradientEstimator` seat. Why each detail is as it is:
+``docs/concepts/vppo.md``.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, fields
+from dataclasses import fields
+from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
 
 from qdil.data import Rollout
-from qdil.envs.vector import LocomotionVectorEnv
-from qdil.executors.base import Executor
-from qdil.executors.local import LocalExecutor
-from qdil.rl.collect import ActionMap, PolicyData, RewardFn
-from qdil.rl.episodes import Evaluation, EvaluationGroup
+from qdil.qd.seats import PhaseResult
+from qdil.rl.collect import PolicyData, RewardFn
 from qdil.rl.networks import VectorizedActor, VectorizedCritic
 from qdil.rl.normalize import RunningMeanStd
 from qdil.rl.ppo import PPOSettings, ppo_update
+
+if TYPE_CHECKING:
+    from qdil.config import PolicyConfig
+    from qdil.envs.vector import LocomotionVectorEnv
+    from qdil.executors.base import Executor
 
 # each phase's critic, its optimiser and return statistics: they persist across QD
 # iterations and restarts (checkpointed beside the noise generator)
 _PERSISTENT = tuple(
     f"{p}_{x}" for p in ("jacobian", "walk") for x in ("critic", "critic_opt", "returns")
 )
-
-
-@dataclass(frozen=True)
-class PhaseResult:
-    """What a VPPO phase hands back to the QD loop.
-
-    Attributes:
-        solutions: (P, D) trained solutions (P = k+1 for the Jacobian, 1 for the walk).
-        stats: their observation statistics.
-        rollouts: the rollouts of the reward-trained policy (copy 0, or the walking θ_μ).
-        diagnostics: mean PPO diagnostics over the phase (``rl/...`` metrics).
-        env_steps: simulated env steps.
-    """
-
-    solutions: np.ndarray
-    stats: RunningMeanStd
-    rollouts: list[Rollout]
-    diagnostics: dict[str, float]
-    env_steps: int
 
 
 class VPPO:
@@ -72,11 +57,9 @@ class VPPO:
         max_grad_norm: per-policy gradient-norm clip.
         target_kl: stop the epochs once the mean approximate KL exceeds it (``None``: never).
         normalize_returns: learn normalised value targets.
-        obs_clip: bound of normalised observations.
         adaptive_std: learn the log standard deviations (PPGA: False for Walker2d and
             Humanoid, True for HalfCheetah).
         bootstrap_truncation: bootstrap time-limit truncations from the final state.
-        actor_hidden: actor widths (paper: 128, 128).
         critic_hidden: critic widths (paper: 256, 256).
     """
 
@@ -98,10 +81,8 @@ class VPPO:
         max_grad_norm: float = 1.0,
         target_kl: float | None = 0.008,
         normalize_returns: bool = True,
-        obs_clip: float = 10.0,
         adaptive_std: bool = False,
         bootstrap_truncation: bool = True,
-        actor_hidden: Sequence[int] = (128, 128),
         critic_hidden: Sequence[int] = (256, 256),
     ) -> None:
         for name, value in (
@@ -129,35 +110,35 @@ class VPPO:
         self.max_grad_norm = max_grad_norm
         self.target_kl = target_kl
         self.normalize_returns = normalize_returns
-        self.obs_clip = obs_clip
         self.adaptive_std = adaptive_std
         self.bootstrap_truncation = bootstrap_truncation
-        self.actor_hidden = tuple(actor_hidden)
         self.critic_hidden = tuple(critic_hidden)
 
     # ------------------------------------------------------------------ setup
     def setup(
         self,
         train_env: LocomotionVectorEnv,
-        eval_env: LocomotionVectorEnv,
+        executor: Executor,
+        policy: PolicyConfig,
+        generator: torch.Generator,
         seed: int,
-        executor: Executor | None = None,
     ) -> None:
-        """Bind the environments and build the persistent critics.
+        """Bind the training simulations and the run's executor; build the persistent critics.
 
-        The policies, critics, statistics, rollouts and the noise generator live on the
-        physics' device, ``train_env.device``.
+        The policies, critics, statistics and rollouts live on the physics' device,
+        ``train_env.device``.
 
         Args:
             train_env: ``SAME_STEP`` environment of the PPO phases; its N must be divisible
                 by k+1.
-            eval_env: ``DISABLED`` environment of the evaluations, on the same device.
-            seed: seed of the critics' initialisation and the action noise.
-            executor: who steps the simulations (default: here, :class:`LocalExecutor`).
+            executor: steps the simulations (set up by the run).
+            policy: the run's policy family (hidden widths).
+            generator: the run's action noise, on ``train_env.device``.
+            seed: seed of the critics' initialisation.
 
         Raises:
-            ValueError: if N is not divisible by k+1, or the environments' devices differ
-                (naming ``env.device``).
+            ValueError: if N is not divisible by k+1, or the environment does not autoreset
+                on the same step.
         """
         num_objectives = train_env.num_feet + 1
         if train_env.num_envs % num_objectives:
@@ -165,24 +146,16 @@ class VPPO:
                 f"env.num_envs={train_env.num_envs} must be divisible by k+1={num_objectives} "
                 "(one block of simulations per VPPO copy)"
             )
-        if eval_env.device != train_env.device:
-            raise ValueError(
-                f"env.device: the training physics steps on {train_env.device} but the "
-                f"evaluations' on {eval_env.device}; one env.device places both"
-            )
-        self.device = train_env.device
-        self.train_env, self.eval_env = train_env, eval_env
         if train_env.autoreset_mode.value != "SameStep":
             raise ValueError("the training environment must use autoreset_mode=SAME_STEP")
-        self.executor = LocalExecutor() if executor is None else executor
-        self.executor.setup(train_env, eval_env, self.obs_clip)
-        self.action_map = ActionMap(
-            train_env.single_action_space.low, train_env.single_action_space.high, self.device
-        )
+        self.device = train_env.device
+        self.train_env = train_env
+        self.executor = executor
+        self.actor_hidden = tuple(policy.hidden)
         self.obs_dim = train_env.single_observation_space.shape[0]
         self.action_dim = train_env.single_action_space.shape[0]
         self.num_objectives = num_objectives
-        self.generator = torch.Generator(device=self.device).manual_seed(seed)
+        self.generator = generator
         self.jacobian_critic = VectorizedCritic(
             num_objectives, self.obs_dim, self.critic_hidden, seed
         ).to(self.device)
@@ -196,17 +169,6 @@ class VPPO:
 
     def _adam(self, params) -> torch.optim.Adam:
         return torch.optim.Adam(params, lr=self.learning_rate, eps=self.adam_eps)
-
-    @property
-    def solution_dim(self) -> int:
-        """D, the length of a policy's flat parameter vector."""
-        return VectorizedActor.solution_dim(self.obs_dim, self.action_dim, self.actor_hidden)
-
-    def initial_solution(self, seed: int) -> np.ndarray:
-        """(D,) PPGA's initial policy θ_0."""
-        return VectorizedActor.initial_solution(
-            self.obs_dim, self.action_dim, self.actor_hidden, seed
-        )
 
     def _actor(self, solutions: np.ndarray) -> VectorizedActor:
         actor = VectorizedActor(len(solutions), self.obs_dim, self.action_dim, self.actor_hidden)
@@ -294,69 +256,6 @@ class VPPO:
         steps = self.walk_iterations * self.rollout_length * self.train_env.num_envs
         return PhaseResult(actor.get_solutions(), stats, rollouts, _mean(diagnostics), steps)
 
-    def evaluate(
-        self,
-        solutions: np.ndarray,
-        stats: RunningMeanStd,
-        episodes: int,
-        seed: int,
-        reward_fn: RewardFn | None = None,
-        deterministic: bool = False,
-    ) -> Evaluation:
-        """Score P solutions over ``episodes`` episodes each (see ``evaluate_policies``)."""
-        return self.evaluate_all([(solutions, stats, episodes, seed)], reward_fn, deterministic)[0]
-
-    def evaluate_all(
-        self,
-        requests: list[tuple[np.ndarray, RunningMeanStd, int, int]],
-        reward_fn: RewardFn | None = None,
-        deterministic: bool = False,
-    ) -> list[Evaluation]:
-        """Score several groups of solutions, each over its own episodes and reset seed.
-
-        On a device the executor plays the groups side by side, each with noise from a
-        generator seeded with its reset seed; on the C engine in turns, with noise from the
-        training generator (``docs/concepts/vppo.md``).
-
-        Args:
-            requests: ``(solutions (P, D), stats, episodes, seed)`` of each group.
-            reward_fn: scores the episodes for the objective; ``None``: the true return.
-            deterministic: act with the mean action or sample.
-
-        Returns:
-            One evaluation per group, in order.
-        """
-        groups = []
-        for solutions, stats, episodes, seed in requests:
-            actor = VectorizedActor(
-                len(solutions), self.obs_dim, self.action_dim, self.actor_hidden
-            ).to(self.device)
-            actor.set_solutions(solutions)  # exactly the stored policies, log σ included
-            generator = torch.Generator(device=self.device).manual_seed(seed)
-            groups.append(EvaluationGroup(actor, stats.to(self.device), episodes, seed, generator))
-        return self.executor.evaluate_all(groups, reward_fn, deterministic, self.generator)
-
-    def log_probs(
-        self, solution: np.ndarray, stats: RunningMeanStd, obs: torch.Tensor, actions: torch.Tensor
-    ) -> torch.Tensor:
-        """(B,) log π(a | s) of executed actions under one policy (for AIRL's discriminator).
-
-        Args:
-            solution: (D,) the policy.
-            stats: its observation statistics (one policy).
-            obs: (B, obs_dim) raw observations.
-            actions: (B, action_dim) executed actions, mapped back to the policy's [-1, 1].
-        """
-        actor = VectorizedActor(1, self.obs_dim, self.action_dim, self.actor_hidden)
-        actor = actor.to(self.device)
-        actor.set_solutions(solution[None])
-        action_map = self.action_map
-        obs, actions, stats = obs.to(self.device), actions.to(self.device), stats.to(self.device)
-        policy_actions = (actions - action_map.low) / action_map.half - 1.0
-        with torch.no_grad():
-            norm = stats.normalize(obs[None].double(), clip=self.obs_clip).float()
-            return actor.distribution(norm).log_prob(policy_actions[None]).sum(-1)[0]
-
     # ---------------------------------------------------------------- PPO core
     def _ppo_update(
         self,
@@ -382,15 +281,13 @@ class VPPO:
 
     # ------------------------------------------------------------ checkpoints
     def state_dict(self) -> dict:
-        """Critics, their optimisers, return statistics and the noise generator."""
-        state = {name: getattr(self, name).state_dict() for name in _PERSISTENT}
-        return {**state, "generator": self.generator.get_state()}
+        """Critics, their optimisers and return statistics (the run keeps the noise)."""
+        return {name: getattr(self, name).state_dict() for name in _PERSISTENT}
 
     def load_state_dict(self, state: dict) -> None:
         """Restore :meth:`state_dict` (after :meth:`setup`)."""
         for name in _PERSISTENT:
             getattr(self, name).load_state_dict(state[name])
-        self.generator.set_state(state["generator"])
 
 
 def _mean(diagnostics: list[dict[str, float]]) -> dict[str, float]:

@@ -1,0 +1,64 @@
+"""Recipes of older runs, read as today's: classes that moved and keys that moved.
+
+A run directory keeps its resolved recipe (``config.yaml``, and a copy in every checkpoint);
+one written before a class or key moved still resumes, re-scores and reports, because every
+reader of a stored recipe passes it through :func:`upgraded` first.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+MOVED_CLASSES = {
+    "qdil.rl.execution.LocalExecutor": "qdil.executors.LocalExecutor",
+    "qdil.rl.VPPO": "qdil.qd.VPPO",
+    "qdil.rl.vppo.VPPO": "qdil.qd.VPPO",
+}
+"""Class paths that the recipes of older runs store, and where those classes are now."""
+
+MOVED_KEYS = {
+    ("rl", "init_args", "actor_hidden"): ("policy", "hidden"),
+    ("rl", "init_args", "obs_clip"): ("policy", "obs_clip"),
+}
+"""Keys that older recipes hold, and where they are now (the policy family left VPPO)."""
+
+
+def _classes(value: Any) -> Any:
+    if isinstance(value, dict):
+        return {key: _classes(item) for key, item in value.items()}
+    if isinstance(value, list):
+        return [_classes(item) for item in value]
+    return MOVED_CLASSES.get(value, value) if isinstance(value, str) else value
+
+
+def upgraded(content: dict[str, Any]) -> dict[str, Any]:
+    """A recipe's content with moved class paths and keys where they are now.
+
+    Args:
+        content: a recipe or a stored resolved recipe (nested dicts, as YAML reads it).
+
+    Returns:
+        A new dict; ``content`` is left as it was. A moved key's value goes to its new
+        place unless the recipe sets that place itself.
+    """
+    content = _classes(content)
+    for old, new in MOVED_KEYS.items():
+        parent = content
+        for part in old[:-1]:
+            parent = parent.get(part) if isinstance(parent, dict) else None
+        if not isinstance(parent, dict) or old[-1] not in parent:
+            continue
+        value = parent.pop(old[-1])
+        target = content
+        for part in new[:-1]:
+            if not isinstance(target.get(part), dict):
+                target[part] = {}
+            target = target[part]
+        target.setdefault(new[-1], value)
+    return content
+
+
+def policy_settings(content: dict[str, Any]) -> tuple[tuple[int, ...], float]:
+    """(hidden widths, observation clip) of the policies of a stored recipe, new or old."""
+    policy = upgraded(content).get("policy") or {}
+    return tuple(policy.get("hidden", (128, 128))), float(policy.get("obs_clip", 10.0))
