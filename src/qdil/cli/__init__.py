@@ -9,6 +9,7 @@ import sys
 # train must not pay for torch, Lightning and pyribs (seconds). Each command imports what it
 # uses.
 from qdil.cli.demos import demos
+from qdil.cli.export import export
 from qdil.cli.fit import build, fit, fit_parser, parse_fit
 from qdil.cli.render import render
 from qdil.cli.results import evaluate, report
@@ -27,6 +28,7 @@ EPILOG = """commands:
   qdil report RUN_DIR... --out DIR                  paper-style tables, tests and figures
   qdil demos RUN_DIR --out FILE | --info FILE       demonstrations from an expert archive
   qdil render RUN_DIR [--cell I J | --top K]        video of an elite's gait (MP4 or GIF)
+  qdil export RUN_DIR --format onnx|torch --out DIR elites as standalone policy files
 
 `qdil COMMAND --help` lists a command's options."""
 
@@ -37,6 +39,7 @@ COMMANDS = {
     "eval": evaluate,
     "report": report,
     "render": render,
+    "export": export,
     "sweep": sweep,
 }
 

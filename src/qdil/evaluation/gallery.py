@@ -123,7 +123,8 @@ def make_gallery(
 
 
 def _render_run(run: RunResult, out: Path, heatmap: str, settings: VideoSettings) -> list[Video]:
-    from qdil.evaluation.video import render_rows, select_rows
+    from qdil.evaluation.elites import select_rows
+    from qdil.evaluation.video import render_rows
 
     archive = policy_archive(run)
     elites = archive.data()

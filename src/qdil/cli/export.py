@@ -1,0 +1,91 @@
+"""``qdil export``: elites of a run as standalone policy files, each with a JSON beside it."""
+
+from __future__ import annotations
+
+import argparse
+
+from qdil.cli.args import at_least, existing_run_dir
+
+
+def export_parser() -> argparse.ArgumentParser:
+    """The options of ``qdil export``."""
+    parser = argparse.ArgumentParser(
+        prog="qdil export",
+        description="Write elites of a run's archive as standalone policy files that run "
+        "without qdil: each holds the elite's observation normalisation, its network and the "
+        "deterministic action in the task's bounds (input obs: (B, obs_dim) float32; output "
+        "action: (B, A) float32). Beside each, a JSON with the task, cell, measures, the "
+        "return of deterministic scoring episodes played on export (reset seed, length, "
+        "return of each), the run and its commit. Guide: docs/guides/use-a-gait-outside-qdil.md",
+    )
+    parser.add_argument("run_dir", metavar="RUN_DIR", help="a run directory made by qdil fit")
+    pick = parser.add_mutually_exclusive_group()
+    pick.add_argument(
+        "--best", action="store_true", help="the elite with the best objective (the default)"
+    )
+    pick.add_argument(
+        "--cell",
+        nargs="+",
+        type=at_least(0),
+        metavar="I",
+        help="one grid cell, one index per measure: --cell I J for Walker2d",
+    )
+    pick.add_argument(
+        "--top",
+        type=at_least(1),
+        metavar="K",
+        help="K elites spread over the measure space (farthest-point sampling from the best)",
+    )
+    parser.add_argument(
+        "--format",
+        choices=("onnx", "torch"),
+        default="onnx",
+        help="onnx: an ONNX model, opset 18 (onnxruntime runs it); torch: a torch.export "
+        "program (.pt2, torch.export.load); default onnx",
+    )
+    parser.add_argument("--out", required=True, metavar="DIR", help="folder for the files")
+    parser.add_argument(
+        "--archive",
+        choices=("true", "deployable"),
+        default="true",
+        help="true: the paper's archive, best policy per cell by true return (default); "
+        "deployable: best by the run's own objective",
+    )
+    parser.add_argument(
+        "--episodes",
+        type=at_least(1),
+        default=5,
+        help="deterministic scoring episodes per elite, recorded in its JSON (default 5)",
+    )
+    parser.add_argument(
+        "--seed", type=at_least(0), default=0, help="reset seed of the first episode (default 0)"
+    )
+    return parser
+
+
+def export(argv: list[str]) -> None:
+    """``qdil export``: elites of a run as policy files."""
+    parser = export_parser()
+    args = parser.parse_args(argv)
+    run_dir = existing_run_dir(parser, args.run_dir)
+    from qdil.export import export_policies
+
+    written = export_policies(
+        run_dir,
+        args.out,
+        args.format,
+        which=args.archive,
+        cell=args.cell,
+        top=args.top,
+        episodes=args.episodes,
+        seed=args.seed,
+    )
+    for item in written:
+        meta = item.metadata
+        measures = ", ".join(f"{m:.2f}" for m in meta["measures"])
+        print(
+            f"cell {tuple(meta['cell'])}: measures ({measures}), corrected return "
+            f"{meta['corrected_return']:.1f} over {len(meta['episodes'])} episodes -> {item.path}"
+        )
+    if args.top is not None and len(written) < args.top:
+        print(f"the {args.archive} archive holds {len(written)} elites: exported them all")
