@@ -146,3 +146,42 @@ def test_export_refuses_a_cell_outside_the_grid_naming_it(runs: Path, tmp_path: 
     with pytest.raises(SystemExit, match=r"--cell 10 0 is not a cell of the 10×10 grid"):
         main(["export", str(runs / "Walker2d-v5"), "--cell", "10", "0", "--out", str(tmp_path)])
     assert not any(tmp_path.iterdir())
+
+
+def test_the_archive_as_a_minari_dataset_reads_back_as_demonstrations(
+    runs: Path, tmp_path: Path, monkeypatch
+) -> None:
+    """Written offline, loaded with minari.load_dataset, imported by qdil: the same steps,
+    and qdil's replayed contacts equal the ones the dataset keeps in ``infos``."""
+    minari = pytest.importorskip("minari")
+    from qdil.demos.importing import import_minari
+
+    monkeypatch.setenv("MINARI_DATASETS_PATH", str(tmp_path))
+    run_dir = runs / "Walker2d-v5"
+    main(["export", str(run_dir), "--format", "minari", "qdil/walker2d/gaits-v0", "--top", "3"])
+    dataset = minari.load_dataset("qdil/walker2d/gaits-v0", download=False)
+    assert dataset.total_episodes == 3 and dataset.env_spec.id == "Walker2d-v5"
+    episodes = list(dataset.iterate_episodes())
+    archive, _ = load_archive(run_dir, "true")
+    elites = archive.data()
+    for episode in episodes:
+        steps = len(episode.actions)
+        assert episode.observations.shape == (steps + 1, 17) and episode.actions.shape[1] == 6
+        assert episode.terminations[-1] or episode.truncations[-1]
+        assert not (episode.terminations[:-1].any() or episode.truncations[:-1].any())
+        infos = episode.infos
+        assert infos["foot_contact"].shape == (steps + 1, 2)
+        (row,) = np.flatnonzero(elites["index"] == archive.grid_to_int_index(infos["cell"][:1])[0])
+        np.testing.assert_array_equal(
+            infos["measures"], np.repeat(elites["measures"][[row]], steps + 1, 0)
+        )
+    demos = import_minari("qdil/walker2d/gaits-v0")
+    assert demos.task == "Walker2d-v5" and len(demos.episode_ends) == 3
+    np.testing.assert_array_equal(
+        demos.obs, np.concatenate([e.observations[:-1] for e in episodes])
+    )
+    np.testing.assert_array_equal(demos.actions, np.concatenate([e.actions for e in episodes]))
+    contacts = np.concatenate([e.infos["foot_contact"][:-1] for e in episodes])
+    np.testing.assert_array_equal(demos.contacts, contacts)
+    with pytest.raises(SystemExit, match="exists already"):
+        main(["export", str(run_dir), "--format", "minari", "qdil/walker2d/gaits-v0"])

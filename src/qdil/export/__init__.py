@@ -1,4 +1,4 @@
-"""Gaits out of qdil: elites as standalone policy files (ONNX, ``torch.export``).
+"""Gaits out of qdil: elites as policy files (ONNX, ``torch.export``) or a Minari dataset.
 
 Why and how to use them: docs/guides/use-a-gait-outside-qdil.md.
 """
