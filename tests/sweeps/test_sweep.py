@@ -55,22 +55,6 @@ def same_runs(a: Path, b: Path) -> bool:
     return metrics(a) == metrics(b) and same_archives(archives(a), archives(b))
 
 
-def test_a_sweep_of_three_trials_equals_three_plain_fits(one_ray, plain, tmp_path) -> None:
-    report = tmp_path / "report"
-    args = ["sweep", str(SMOKE), "--seeds", *SEEDS, "--root", str(tmp_path / "runs")]
-    main([*args, "--episodes", "1", "--report", str(report)])
-    for seed in SEEDS:
-        run = tmp_path / "runs" / f"walker_true-seed{seed}"
-        assert same_runs(run, plain / f"walker_true-seed{seed}")
-        assert (run / "eval.json").is_file()  # re-scored
-        assert "wandb_group: sweep-" in (run / "config.yaml").read_text()  # W&B groups them
-    assert (report / "report.md").is_file()
-    # the same command again: every trial is finished, nothing is written to its run
-    before = {p: p.stat().st_mtime_ns for p in (tmp_path / "runs").glob("walker_*/**/*")}
-    main([*args, "--episodes", "1"])
-    assert before == {p: p.stat().st_mtime_ns for p in (tmp_path / "runs").glob("walker_*/**/*")}
-
-
 def test_a_trial_with_the_ray_executor_joins_the_sweeps_cluster(one_ray, plain, tmp_path):
     """Its ``qdil fit`` (executor address null) runs its workers on the sweep's own Ray."""
     root = tmp_path / "runs"
@@ -110,11 +94,13 @@ def test_a_missing_demonstration_file_stops_the_sweep_before_anything_starts(tmp
     assert not root.exists()
 
 
-def test_a_killed_sweep_run_again_ends_as_an_unbroken_one(plain, tmp_path) -> None:
-    """The driver, Ray and the trials killed at once (SIGKILL to the process group)."""
-    root = tmp_path / "runs"
+def test_a_killed_sweep_run_again_ends_as_three_plain_fits(plain, tmp_path) -> None:
+    """The driver, Ray and the trials killed at once (SIGKILL to the process group); the same
+    command again finishes every trial as ``qdil fit`` would have, re-scores them and reports;
+    once more, it finds every trial finished and writes nothing."""
+    root, report = tmp_path / "runs", tmp_path / "report"
     command = [sys.executable, "-m", "qdil.cli", "sweep", str(SMOKE), "--seeds", *SEEDS]
-    command += ["--root", str(root), "--episodes", "0", "--qd.iterations", "3"]
+    command += ["--root", str(root), "--episodes", "1", "--report", str(report)]
     env = {k: v for k, v in os.environ.items() if k != "QDIL_PLUGIN_PATH"}
     sweep = subprocess.Popen(command, env=env, start_new_session=True, cwd=tmp_path,
                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)  # fmt: skip
@@ -128,10 +114,19 @@ def test_a_killed_sweep_run_again_ends_as_an_unbroken_one(plain, tmp_path) -> No
         len(metrics(r)) for r in root.glob("walker_true-seed*") if (r / "metrics.csv").is_file()
     ]
     assert min(logged, default=0) < 3 or len(logged) < 3  # killed before the sweep's end
+    assert not report.exists()
     done = subprocess.run(command, env=env, cwd=tmp_path, capture_output=True, text=True)
     assert done.returncode == 0, done.stderr[-3000:]
     for seed in SEEDS:
-        assert same_runs(root / f"walker_true-seed{seed}", plain / f"walker_true-seed{seed}")
+        run = root / f"walker_true-seed{seed}"
+        assert same_runs(run, plain / f"walker_true-seed{seed}")
+        assert (run / "eval.json").is_file()  # re-scored
+        assert "wandb_group: sweep-" in (run / "config.yaml").read_text()  # W&B groups them
+    assert (report / "report.md").is_file()
+    before = {p: p.stat().st_mtime_ns for p in root.glob("walker_*/**/*")}
+    again = subprocess.run(command, env=env, cwd=tmp_path, capture_output=True, text=True)
+    assert again.returncode == 0, again.stderr[-3000:]
+    assert before == {p: p.stat().st_mtime_ns for p in root.glob("walker_*/**/*")}
 
 
 def test_sweep_help_lists_its_options() -> None:
