@@ -331,11 +331,28 @@ def gpu_files() -> dict[Path, str]:
     return out
 
 
+def cvt_files() -> dict[Path, str]:
+    """TASK_mcwae_cvt.yaml: WQDIL (laptop) searching a CVT archive of as many cells as the grid."""
+    out = {}
+    for task in TASKS:
+        text, body = recipe(task, "mcwae", paper=False)
+        cells = body["qd"]["cells"] ** 2  # two feet on every task
+        body["qd"]["archive"] = {"type": "cvt", "centroids": cells}
+        note = [
+            f"Search archive: pyribs' CVTArchive of {cells:,} cells (k-means centroids, made",
+            "once and kept with the run); the reported archives stay the grid of qd.cells.",
+        ]
+        out[HERE / f"{task}_mcwae_cvt.yaml"] = (
+            text + header(note) + yaml.safe_dump(body, sort_keys=False)
+        )
+    return out
+
+
 def main() -> None:
     """Write the recipes (``--check``: only report files that differ)."""
     check = "--check" in sys.argv
     stale = []
-    for path, text in (files() | gpu_files()).items():
+    for path, text in (files() | gpu_files() | cvt_files()).items():
         if check:
             if not path.exists() or path.read_text() != text:
                 stale.append(path)

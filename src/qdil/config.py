@@ -88,6 +88,26 @@ class EnvConfig:
 
 
 @dataclass
+class SearchArchiveConfig:
+    """The search (CMA-MAE) archive: the grid of ``qd.cells``, or a CVT archive.
+
+    Only the archive the emitter and scheduler search in changes; the reported true and
+    deployable archives stay the grid of ``qd.cells``, so metrics stay comparable.
+
+    Attributes:
+        type: ``grid`` (``qd.cells`` per measure) or ``cvt`` (pyribs' ``CVTArchive``: cells
+            are the Voronoi regions of ``centroids`` points in the measure space).
+        centroids: ``cvt``: how many cells; the centroids come from k-means over ``samples``
+            uniform points, made once and kept with the run (``centroids.npy``).
+        samples: ``cvt``: uniform points the k-means runs over.
+    """
+
+    type: Literal["grid", "cvt"] = "grid"
+    centroids: int = 2500
+    samples: int = 100_000
+
+
+@dataclass
 class QDConfig:
     """The quality-diversity side: archives, emitter, scheduler, evaluation.
 
@@ -108,6 +128,7 @@ class QDConfig:
             QD-IL code does; not imitation).
         emitter: emitter class and hyperparameters (default: ``qdil.qd.PPGAEmitter``).
         scheduler: pyribs scheduler class and options (default: ``ribs.schedulers.Scheduler``).
+        archive: the search archive: the grid of ``cells`` (default) or a CVT archive.
     """
 
     iterations: int = 2000
@@ -121,6 +142,7 @@ class QDConfig:
     fitness: Literal["reward", "true"] = "reward"
     emitter: EmitterFactory | None = None
     scheduler: SchedulerFactory | None = None
+    archive: SearchArchiveConfig = field(default_factory=SearchArchiveConfig)
 
 
 def finished(qd: QDConfig | Any, iteration: int, env_steps: int) -> bool:

@@ -8,7 +8,7 @@ from typing import Any
 import lightning as L
 import numpy as np
 import torch
-from ribs.archives import GridArchive
+from ribs.archives import ArchiveBase, k_means_centroids
 from ribs.schedulers import Scheduler
 
 from qdil.config import (
@@ -26,7 +26,15 @@ from qdil.devices import DEVICE_BACKENDS, fabric_settings
 from qdil.envs.vector import LocomotionVectorEnv
 from qdil.executors.base import Executor
 from qdil.executors.local import LocalExecutor
-from qdil.qd.archives import RunArchives, deployable_fields, elite_fields, make_grid
+from qdil.files import atomic_write
+from qdil.qd.archives import (
+    CENTROIDS,
+    RunArchives,
+    deployable_fields,
+    elite_fields,
+    make_cvt,
+    make_grid,
+)
 from qdil.qd.emitter import PPGAEmitter
 from qdil.qd.scoring import Scorer
 from qdil.qd.seats import GradientEstimator, SearchEmitter, SearchScheduler
@@ -91,29 +99,60 @@ def _environment(
     )
 
 
-def _archives(qd: QDConfig, solution_dim: int, obs_dim: int, k: int, seed: int) -> RunArchives:
-    """The run's three grid archives over ``k`` foot-contact measures.
+def _centroids(qd: QDConfig, k: int, seed: int, run_dir: Path) -> np.ndarray:
+    """The CVT search archive's (cells, k) centroids: made once, then read from the run.
+
+    k-means' last bits may differ between CPUs, so the run keeps the centroids it made in
+    ``centroids.npy`` and a resume reads them (the checkpoint's archive holds them too).
+    """
+    path = run_dir / CENTROIDS
+    if path.is_file():
+        centroids = np.load(path)
+        if centroids.shape == (qd.archive.centroids, k):
+            return centroids
+    centroids, _ = k_means_centroids(
+        centroids=qd.archive.centroids,
+        ranges=[(0.0, 1.0)] * k,
+        samples=qd.archive.samples,
+        seed=seed,
+    )
+    run_dir.mkdir(parents=True, exist_ok=True)
+    atomic_write(path, lambda file: np.save(file, centroids))
+    return centroids
+
+
+def _archives(
+    qd: QDConfig, solution_dim: int, obs_dim: int, k: int, seed: int, run_dir: Path
+) -> RunArchives:
+    """The run's archives over ``k`` foot-contact measures: search, true and deployable.
 
     Args:
-        qd: The recipe's ``qd`` section (cells per measure, CMA-MAE's learning rate and
-            threshold).
+        qd: The recipe's ``qd`` section (cells per measure, the search archive, CMA-MAE's
+            learning rate and threshold).
         solution_dim: Length of a policy's flat parameter vector.
         obs_dim: Observation size (the elites keep their observation statistics).
         k: Number of measures (feet).
-        seed: Seeds the three archives, in the order main, true, deployable.
+        seed: Seeds the three archives, in the order main, true, deployable (and the CVT
+            archive's k-means after them).
+        run_dir: Where a CVT archive's centroids are kept.
     """
     fields = elite_fields(obs_dim)
     cells = [qd.cells] * k
-    archive_seeds = np.random.SeedSequence(seed).generate_state(3)
+    archive_seeds = np.random.SeedSequence(seed).generate_state(4)
+    search = {
+        "solution_dim": solution_dim,
+        "extra_fields": fields,
+        "learning_rate": qd.archive_learning_rate,
+        "threshold_min": qd.threshold_min,
+        "seed": int(archive_seeds[0]),
+    }
+    if qd.archive.type == "cvt":
+        centroids = _centroids(qd, k, int(archive_seeds[3]), run_dir)
+        main = make_cvt(centroids=centroids, **search)
+    else:
+        main = make_grid(cells=cells, **search)
     return RunArchives(
-        main=make_grid(
-            solution_dim=solution_dim,
-            cells=cells,
-            extra_fields=fields,
-            learning_rate=qd.archive_learning_rate,
-            threshold_min=qd.threshold_min,
-            seed=int(archive_seeds[0]),
-        ),
+        main=main,
         true=make_grid(
             solution_dim=solution_dim, cells=cells, extra_fields=fields, seed=int(archive_seeds[1])
         ),
@@ -127,7 +166,7 @@ def _archives(qd: QDConfig, solution_dim: int, obs_dim: int, k: int, seed: int) 
 
 
 def _search(
-    qd: QDConfig, main: GridArchive, x0: np.ndarray, obs_dim: int, seed: int
+    qd: QDConfig, main: ArchiveBase, x0: np.ndarray, obs_dim: int, seed: int
 ) -> tuple[SearchEmitter, SearchScheduler]:
     """The search emitter that walks from ``x0`` and the scheduler over ``main``.
 
@@ -300,7 +339,7 @@ def build_run(
     action_dim = train_env.single_action_space.shape[0]
     solution_dim = VectorizedActor.solution_dim(obs_dim, action_dim, policy.hidden)
 
-    archives = _archives(qd, solution_dim, obs_dim, train_env.num_feet, archive_seed)
+    archives = _archives(qd, solution_dim, obs_dim, train_env.num_feet, archive_seed, run_dir)
     x0 = VectorizedActor.initial_solution(obs_dim, action_dim, policy.hidden, x0_seed)
     emitter, scheduler = _search(qd, archives.main, x0, obs_dim, emitter_seed)
 

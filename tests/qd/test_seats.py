@@ -116,3 +116,32 @@ def test_an_estimator_that_only_fills_its_seat_runs_the_loop_as_vppo(
     main(["fit", "--resume", "runs/delegating", "--qd.iterations", "3"])
     assert rows(Path("runs/delegating")) == rows(Path("runs/vppo"))
     assert len(rows(Path("runs/vppo"))) == 3
+
+
+def test_a_cvt_search_archive_keeps_its_centroids_resumes_and_is_scored(
+    tmp_path: Path, monkeypatch, walker_demos
+) -> None:
+    """WQDIL's reward with the EBC bonus, which reads the search archive's cells; the
+    reported archives stay the grid."""
+    import pickle
+
+    import numpy as np
+    import torch
+    from ribs.archives import CVTArchive, GridArchive
+
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.delenv("QDIL_PLUGIN_PATH", raising=False)
+    il = ROOT / "recipes" / "smoke" / "walker_il.yaml"
+    common = [str(il), "--demos.path", str(walker_demos), "--qd.archive.type", "cvt"]
+    common += ["--qd.archive.centroids", "30", "--bonus.enabled", "true", "--bonus.type", "ebc"]
+    main(["fit", *common, "--qd.iterations", "3", "--name", "straight"])
+    main(["fit", *common, "--qd.iterations", "2", "--name", "resumed"])
+    main(["fit", "--resume", "runs/resumed", "--qd.iterations", "3"])
+    assert rows(Path("runs/resumed")) == rows(Path("runs/straight"))
+    state = torch.load("runs/resumed/checkpoints/last.pt", weights_only=False)
+    search = pickle.loads(state["scheduler"]).archive
+    assert isinstance(search, CVTArchive) and search.centroids.shape == (30, 2)
+    np.testing.assert_array_equal(search.centroids, np.load("runs/resumed/centroids.npy"))
+    assert isinstance(pickle.loads(state["true_archive"]), GridArchive)
+    main(["eval", "runs/resumed", "--episodes", "1"])
+    assert (Path("runs/resumed") / "eval.json").is_file()

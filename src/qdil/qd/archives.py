@@ -1,8 +1,9 @@
 """The archives of a QD-IL run and their metrics (decisions D1 and D10).
 
-:class:`RunArchives` holds a run's three grid archives over the foot-contact measures:
-``main`` (CMA-MAE, keyed on the learned return), ``true`` (keyed on the true return: the
-paper's) and ``deployable`` (keyed on the run's own objective). :func:`qd_metrics` scores one
+:class:`RunArchives` holds a run's three archives over the foot-contact measures:
+``main`` (CMA-MAE's search archive, keyed on the learned return: a grid, or a CVT archive),
+``true`` (a grid keyed on the true return: the paper's) and ``deployable`` (a grid keyed on
+the run's own objective). :func:`qd_metrics` scores one
 archive. Why three: docs/concepts/loop.md; the metrics: docs/concepts/metrics.md.
 """
 
@@ -12,7 +13,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from ribs.archives import ArchiveBase, GridArchive
+from ribs.archives import ArchiveBase, CVTArchive, GridArchive
 
 QD_OFFSETS: dict[str, float] = {
     "Walker2d-v5": 1.413,
@@ -88,11 +89,37 @@ def make_grid(
     )
 
 
+CENTROIDS = "centroids.npy"
+"""A run's file of its CVT search archive's centroids (``qd.archive.type: cvt``)."""
+
+
+def make_cvt(
+    *,
+    solution_dim: int,
+    centroids: np.ndarray,
+    extra_fields: dict,
+    learning_rate: float,
+    threshold_min: float,
+    seed: int | None = None,
+) -> CVTArchive:
+    """A CVTArchive over [0, 1]^k with the given (cells, k) centroids, float32 policies."""
+    return CVTArchive(
+        solution_dim=solution_dim,
+        centroids=centroids,
+        ranges=[(0.0, 1.0)] * centroids.shape[1],
+        learning_rate=learning_rate,
+        threshold_min=threshold_min,
+        solution_dtype=np.float32,
+        extra_fields=extra_fields,
+        seed=seed,
+    )
+
+
 @dataclass
 class RunArchives:
     """The three archives of a run (see the module docstring)."""
 
-    main: GridArchive
+    main: ArchiveBase  # the search archive: a grid, or a CVT archive
     true: GridArchive
     deployable: GridArchive
 

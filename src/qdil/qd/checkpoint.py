@@ -38,6 +38,9 @@ IMPLICIT_KEYS = {
     "bonus.type": "single_step",
     "bonus.offset": 0.0,
     "bonus.in_fitness": True,
+    "qd.archive.type": "grid",
+    "qd.archive.centroids": 2500,
+    "qd.archive.samples": 100_000,
 }
 
 
