@@ -52,3 +52,35 @@ def existing_run_dir(parser: argparse.ArgumentParser, text: str) -> Path:
             "by qdil fit (runs/NAME)"
         )
     return path
+
+
+def add_elite_choice(parser: argparse.ArgumentParser, top_note: str = "") -> None:
+    """``--best | --cell I J | --top K`` and ``--archive``: which elites a command takes.
+
+    ``qdil render`` and ``qdil export`` offer the same choice in the same words.
+    """
+    pick = parser.add_mutually_exclusive_group()
+    pick.add_argument(
+        "--best", action="store_true", help="the elite with the best objective (the default)"
+    )
+    pick.add_argument(
+        "--cell",
+        nargs="+",
+        type=at_least(0),
+        metavar="I",
+        help="one grid cell, one index per measure: --cell I J for Walker2d",
+    )
+    pick.add_argument(
+        "--top",
+        type=at_least(1),
+        metavar="K",
+        help=f"K elites spread over the measure space (farthest-point sampling from the best)"
+        f"{top_note}",
+    )
+    parser.add_argument(
+        "--archive",
+        choices=("true", "deployable"),
+        default="true",
+        help="true: the paper's archive, best policy per cell by true return (default); "
+        "deployable: best by the run's own objective",
+    )

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from qdil.cli.args import at_least, existing_run_dir
+from qdil.cli.args import add_elite_choice, at_least, existing_run_dir
 
 
 def export_parser() -> argparse.ArgumentParser:
@@ -27,23 +27,7 @@ def export_parser() -> argparse.ArgumentParser:
         help="--format minari: the dataset's Minari id, e.g. qdil/walker2d/gaits-v0 (written "
         "under MINARI_DATASETS_PATH, default ~/.minari/datasets)",
     )
-    pick = parser.add_mutually_exclusive_group()
-    pick.add_argument(
-        "--best", action="store_true", help="the elite with the best objective (the default)"
-    )
-    pick.add_argument(
-        "--cell",
-        nargs="+",
-        type=at_least(0),
-        metavar="I",
-        help="one grid cell, one index per measure: --cell I J for Walker2d",
-    )
-    pick.add_argument(
-        "--top",
-        type=at_least(1),
-        metavar="K",
-        help="K elites spread over the measure space (farthest-point sampling from the best)",
-    )
+    add_elite_choice(parser)
     parser.add_argument(
         "--format",
         choices=("onnx", "torch", "minari"),
@@ -53,13 +37,6 @@ def export_parser() -> argparse.ArgumentParser:
         "NAME; default onnx",
     )
     parser.add_argument("--out", metavar="DIR", help="folder for the policy files")
-    parser.add_argument(
-        "--archive",
-        choices=("true", "deployable"),
-        default="true",
-        help="true: the paper's archive, best policy per cell by true return (default); "
-        "deployable: best by the run's own objective",
-    )
     parser.add_argument(
         "--episodes",
         type=at_least(1),

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from qdil.cli.args import at_least, existing_run_dir
+from qdil.cli.args import add_elite_choice, at_least, existing_run_dir
 
 
 def even_size(text: str) -> int:
@@ -43,31 +43,7 @@ def render_parser() -> argparse.ArgumentParser:
         "(libosmesa6); MUJOCO_GL picks one, else EGL then OSMesa are tried.",
     )
     parser.add_argument("run_dir", metavar="RUN_DIR", help="a run directory made by qdil fit")
-    pick = parser.add_mutually_exclusive_group()
-    pick.add_argument(
-        "--best", action="store_true", help="the elite with the best objective (the default)"
-    )
-    pick.add_argument(
-        "--cell",
-        nargs="+",
-        type=at_least(0),
-        metavar="I",
-        help="one grid cell, one index per measure: --cell I J for Walker2d",
-    )
-    pick.add_argument(
-        "--top",
-        type=at_least(1),
-        metavar="K",
-        help="K elites spread over the measure space (farthest-point sampling from the best), "
-        "one file each in the --out folder",
-    )
-    parser.add_argument(
-        "--archive",
-        choices=("true", "deployable"),
-        default="true",
-        help="true: the paper's archive, best policy per cell by true return (default); "
-        "deployable: best by the run's own objective",
-    )
+    add_elite_choice(parser, ", one file each in the --out folder")
     parser.add_argument(
         "--out",
         metavar="PATH",
