@@ -194,3 +194,31 @@ def test_a_refused_token_is_named_with_its_fix(token_head: str, auth: dict, tmp_
     assert "requires Ray's token authentication" in done.stdout, done.stdout
     assert "RAY_AUTH_TOKEN" in done.stdout and "RAY_AUTH_MODE=disabled" in done.stdout
     assert "cannot reach" not in done.stdout
+
+
+def test_a_run_without_an_address_never_joins_another_process_local_ray(tmp_path) -> None:
+    """Ray's own ``address=None`` joins the cluster named in ``ray_current_cluster`` (left
+    by ``ray start`` or a test's cluster, which may stop mid-run); the run starts its own."""
+    root = tempfile.mkdtemp(prefix="qdil-ray-")  # short: Ray's socket paths
+    try:
+        os.mkdir(os.path.join(root, "ray"))
+        with open(os.path.join(root, "ray", "ray_current_cluster"), "w") as current:
+            current.write(f"127.0.0.1:{_free_port()}")  # a cluster that has gone
+        env = _env_without_ray_auth(str(tmp_path), RAY_TMPDIR=root)
+        env |= {"RAY_gcs_server_port_wait_time_s": "2", "RAY_DISABLE_USAGE_STATS": "1"}
+        launch = [sys.executable, "-c", _LAUNCH.format(address=None)]
+        done = subprocess.run(launch, env=env, capture_output=True, text=True, timeout=180)
+        assert done.returncode == 0, done.stderr[-3000:]
+        assert done.stdout.strip().endswith("joined"), done.stdout
+    finally:
+        shutil.rmtree(root, ignore_errors=True)
+
+
+def test_the_address_given_to_ray(monkeypatch) -> None:
+    from qdil.executors.ray import ray_address
+
+    monkeypatch.delenv("RAY_ADDRESS", raising=False)
+    assert ray_address(None) == "local"
+    assert ray_address("auto") == "auto" and ray_address("10.0.0.1:6379") == "10.0.0.1:6379"
+    monkeypatch.setenv("RAY_ADDRESS", "10.0.0.2:6379")  # a sweep's trial on a cluster
+    assert ray_address(None) == "10.0.0.2:6379"

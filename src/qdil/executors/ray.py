@@ -41,11 +41,12 @@ class RayExecutor(ShardedExecutor):
     """Simulations in shards on Ray actors; PPO, rewards, pyribs and xNES stay on the head.
 
     Args:
-        address: the Ray cluster to join: ``null`` starts Ray on this machine unless this
-            process already joined one (``ray.init`` was called), ``auto`` joins the
-            cluster started on this machine with ``ray start``, ``HOST:6379`` joins a
-            cluster's head node from one of its machines, ``ray://HOST:10001`` connects
-            through Ray Client.
+        address: the Ray cluster to join: ``null`` starts a Ray of the run's own on this
+            machine unless this process already joined one (``ray.init`` was called) or
+            ``RAY_ADDRESS`` names one (never another process's local Ray, which may stop
+            mid-run), ``auto`` joins the cluster started on this machine with ``ray start``,
+            ``HOST:6379`` joins a cluster's head node from one of its machines,
+            ``ray://HOST:10001`` connects through Ray Client.
         num_workers: actors W, one shard of simulations each; each asks Ray for
             ``threads_per_worker`` CPUs.
         threads_per_worker: physics and torch threads of each worker.
@@ -71,7 +72,7 @@ class RayExecutor(ShardedExecutor):
             # a Ray older than its token authentication has no AuthenticationError to catch
             refused = getattr(ray.exceptions, "AuthenticationError", ConnectionError)
             try:
-                ray.init(address=self.address, log_to_driver=True)
+                ray.init(address=ray_address(self.address), log_to_driver=True)
             except (ConnectionError, TimeoutError, refused) as error:
                 if _token_refused(error):
                     raise ExecutorError(_token_refused_message(self.address)) from error
@@ -115,6 +116,18 @@ class RayExecutor(ShardedExecutor):
         for worker in self.workers:
             ray.kill(worker, no_restart=True)
         self.workers = []
+
+
+def ray_address(address: str | None) -> str:
+    """What ``ray.init`` is given for ``address``: ``None`` means ``RAY_ADDRESS`` or a new Ray.
+
+    Ray itself reads ``None`` as "the cluster last started on this machine" (its
+    ``ray_current_cluster`` file, written by ``ray start`` and by test clusters): a run would
+    join, and die with, whatever Ray another process left running.
+    """
+    if address is not None:
+        return address
+    return os.environ.get("RAY_ADDRESS") or "local"
 
 
 def _check_reachable(address: str | None) -> None:

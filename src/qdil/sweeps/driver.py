@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Any
 
 from ray.tune import Callback
 
+from qdil.executors.ray import ray_address
 from qdil.sweeps.trials import Trial
 
 if TYPE_CHECKING:
@@ -105,7 +106,9 @@ def run_sweep(
 
     started = not ray.is_initialized()
     if started:
-        ray.init(address=resources.address, include_dashboard=False, log_to_driver=False)
+        ray.init(
+            address=ray_address(resources.address), include_dashboard=False, log_to_driver=False
+        )
     try:
         specs = [
             {**asdict(t), "recipe": str(t.recipe), "root": str(t.root), "cwd": str(t.cwd)}
