@@ -15,6 +15,7 @@ import sys
 from pathlib import Path
 
 import yaml
+from baselines import baseline_files
 
 HERE = Path(__file__).resolve().parent
 
@@ -352,7 +353,9 @@ def main() -> None:
     """Write the recipes (``--check``: only report files that differ)."""
     check = "--check" in sys.argv
     stale = []
-    for path, text in (files() | gpu_files() | cvt_files()).items():
+    for path, text in (
+        files() | gpu_files() | cvt_files() | baseline_files(HERE, TASKS, PAPER_PPGA)
+    ).items():
         if check:
             if not path.exists() or path.read_text() != text:
                 stale.append(path)

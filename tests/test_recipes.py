@@ -11,7 +11,7 @@ import pytest
 import yaml
 
 from qdil.cli import fit_parser, parse_fit
-from qdil.qd.vppo import VPPO
+from qdil.qd import VPPO, ESGradients
 
 ROOT = Path(__file__).resolve().parents[1]
 RECIPES = sorted((ROOT / "recipes").rglob("*.yaml"))
@@ -71,7 +71,7 @@ def test_recipe_parses_and_instantiates(recipe: Path) -> None:
         pytest.importorskip(module, reason=f"the plugin of {recipe.name} is not installed")
     config, _, _ = parse_fit([str(recipe)])
     init = fit_parser().instantiate(config)
-    assert isinstance(init.rl, VPPO)
+    assert isinstance(init.rl, ESGradients if recipe.stem.endswith("_es") else VPPO)
     model = init.reward(17, 6, 2)
     assert model.name
     if "paper" in recipe.parts:

@@ -194,18 +194,27 @@ def _search(
     return emitter, scheduler
 
 
-def _eval_size(env: EnvConfig, qd: QDConfig, emitter: SearchEmitter) -> int:
+def _eval_size(
+    env: EnvConfig, qd: QDConfig, emitter: SearchEmitter, estimator: GradientEstimator
+) -> int:
     """How many simulations the evaluation environment holds (``env.eval_envs`` if set).
 
     A device scores θ_μ and the branches side by side (fewer steps in sequence); the C
     engine plays them one after the other, so its environment fits the larger of the two.
+    An estimator that plays episodes itself (``eval_slots``: ES gradients) plays them alone.
     """
     branch_slots = emitter.batch_size * qd.branch_episodes
+    own = int(getattr(estimator, "eval_slots", 0))
+    if env.eval_envs and env.eval_envs < own:
+        raise ValueError(
+            f"env.eval_envs={env.eval_envs}: the gradient estimator plays {own} episodes at "
+            f"once; set env.eval_envs to at least {own}, or to null"
+        )
     if env.eval_envs:
         return env.eval_envs
     if env.backend in DEVICE_BACKENDS:
-        return branch_slots + qd.mean_episodes
-    return max(branch_slots, qd.mean_episodes)
+        return max(branch_slots + qd.mean_episodes, own)
+    return max(branch_slots, qd.mean_episodes, own)
 
 
 def _reward_model(
@@ -343,7 +352,7 @@ def build_run(
     x0 = VectorizedActor.initial_solution(obs_dim, action_dim, policy.hidden, x0_seed)
     emitter, scheduler = _search(qd, archives.main, x0, obs_dim, emitter_seed)
 
-    eval_env = _environment(env, _eval_size(env, qd, emitter), "Disabled", device)
+    eval_env = _environment(env, _eval_size(env, qd, emitter, rl), "Disabled", device)
     executor, scorer, noise = set_up_policies(train_env, eval_env, rl, policy, executor, rl_seed)
 
     model, optimizers, fabric = _reward_model(reward, bonus, archives, train_env)

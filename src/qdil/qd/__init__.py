@@ -1,7 +1,8 @@
-"""The quality-diversity side: the seats, archives, the PPGA emitter, xNES, VPPO, the loop."""
+"""The quality-diversity side: seats, archives, emitter, xNES, estimators (VPPO, ES), loop."""
 
 from qdil.qd.emitter import PPGAEmitter
+from qdil.qd.es_gradients import ESGradients
 from qdil.qd.vppo import VPPO
 from qdil.qd.xnes import XNES
 
-__all__ = ["VPPO", "XNES", "PPGAEmitter"]
+__all__ = ["VPPO", "XNES", "ESGradients", "PPGAEmitter"]

@@ -80,6 +80,9 @@ class GradientEstimator(Seat):
     - ``walk(theta, stats, coefficients, reward_fn, seed) -> PhaseResult``: θ_μ moved along
       c_0·∇f + Σ c_j·∇m_j, with its observation statistics;
     - ``state_dict()`` / ``load_state_dict(state)``: what a checkpoint keeps.
+
+    An estimator that plays evaluation episodes itself (ES gradients) says how many at once
+    in an ``eval_slots`` attribute; the run's evaluation environment holds that many.
     """
 
     title = "gradient estimator"
