@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Any, Literal
 import numpy as np
 from ribs.archives import ArchiveBase
 
-from qdil.qd.seats import SearchEmitter, SearchScheduler
+from qdil.qd.seats import Emitter, Scheduler
 
 if TYPE_CHECKING:
     from qdil.rewards.base import RewardModel
@@ -29,10 +29,11 @@ if TYPE_CHECKING:
 RewardFactory = typing.Callable[[int, int, int], "RewardModel"]
 """A reward model class with its hyperparameters; qdil passes obs_dim, action_dim, k."""
 
-EmitterFactory = Callable[[ArchiveBase, np.ndarray], SearchEmitter]
-"""An emitter class with its hyperparameters; qdil passes the CMA-MAE archive and θ_0."""
+EmitterFactory = Callable[[ArchiveBase, np.ndarray], Emitter]
+"""An emitter class with its hyperparameters; qdil passes the search archive, θ_0 (as ``x0``)
+and ``seed``."""
 
-SchedulerFactory = Callable[[ArchiveBase, list[SearchEmitter]], SearchScheduler]
+SchedulerFactory = Callable[[ArchiveBase, list[Emitter]], Scheduler]
 """A scheduler class with its options (pyribs'); qdil passes the archive and emitters."""
 
 
@@ -127,6 +128,8 @@ class QDConfig:
             (decision D1; imitation). ``true``: the true return (an oracle, as the public
             QD-IL code does; not imitation).
         emitter: emitter class and hyperparameters (default: ``qdil.qd.PPGAEmitter``).
+        emitters: how many emitters the scheduler gets, each from ``emitter`` with a seed
+            of its own (1 beside a gradient estimator; sep-CMA-MAE: several).
         scheduler: pyribs scheduler class and options (default: ``ribs.schedulers.Scheduler``).
         archive: the search archive: the grid of ``cells`` (default) or a CVT archive.
     """
@@ -141,6 +144,7 @@ class QDConfig:
     deterministic_eval: bool = False
     fitness: Literal["reward", "true"] = "reward"
     emitter: EmitterFactory | None = None
+    emitters: int = 1
     scheduler: SchedulerFactory | None = None
     archive: SearchArchiveConfig = field(default_factory=SearchArchiveConfig)
 

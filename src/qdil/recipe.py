@@ -43,6 +43,7 @@ MINIMUMS: dict[str, float] = {
     "qd.cells": 1,
     "qd.branch_episodes": 1,
     "qd.mean_episodes": 1,
+    "qd.emitters": 1,
     "bonus.cells": 1,
     "demos.num_episodes": 1,
     "logging.checkpoint_every": 1,
@@ -59,7 +60,7 @@ def recipe(
     env: EnvConfig,
     qd: QDConfig,
     policy: PolicyConfig = PolicyConfig(),  # noqa: B008
-    rl: GradientEstimator = lazy_instance(VPPO),  # noqa: B008 - jsonargparse's lazy default
+    rl: GradientEstimator | None = lazy_instance(VPPO),  # noqa: B008 - jsonargparse's lazy default
     bonus: BonusConfig = BonusConfig(),  # noqa: B008
     demos: DemoConfig = DemoConfig(),  # noqa: B008
     logging: LoggingConfig = LoggingConfig(),  # noqa: B008
@@ -75,8 +76,9 @@ def recipe(
         env: the task and its simulations.
         qd: archives, emitter, scheduler and evaluation.
         policy: the policies the archive's solutions are (network widths, observation clip).
-        rl: the gradient estimator (``class_path``: ``qdil.qd.VPPO``, or any class with the
-            members of ``qdil.qd.seats.GradientEstimator``).
+        rl: the gradient estimator (``class_path``: ``qdil.qd.VPPO``, ``qdil.qd.ESGradients``
+            or any class with the members of ``qdil.qd.seats.GradientEstimator``); ``null``
+            for gradient-free emitters (sep-CMA-MAE), which need none.
         bonus: an exploration bonus added to any reward model (``type``: ``single_step``
             or ``ebc``).
         demos: demonstrations for the reward model.
@@ -158,8 +160,9 @@ def class_path_problem(content: dict[str, Any], overrides: list[str]) -> str | N
         ``"<key>: <what is wrong>"`` for the first class that cannot be imported or lacks
         members of its seat (:mod:`qdil.qd.seats`), or None.
     """
+    search = _has_estimator(content, overrides)
     for key, path in _class_paths(content, overrides):
-        problem = _import_problem(path) or seat_problem(key, _imported(path))
+        problem = _import_problem(path) or seat_problem(key, _imported(path), search)
         if problem is not None:
             return f"{key}: {problem}"
     return None
@@ -177,6 +180,17 @@ def _imported(path: str) -> Any:
             obj = getattr(obj, attr)
         return obj
     return None
+
+
+def _has_estimator(content: dict[str, Any], overrides: list[str]) -> bool:
+    """Whether the run has a gradient estimator (``rl`` is not set to null, last word wins)."""
+    has = not ("rl" in content and content["rl"] is None)
+    for i, arg in enumerate(overrides):
+        flag, sep, value = arg.partition("=")
+        if flag == "--rl":
+            value = value if sep else (overrides[i + 1] if i + 1 < len(overrides) else "")
+            has = value.strip().lower() not in ("null", "none")
+    return has
 
 
 def _class_paths(content: dict[str, Any], overrides: list[str]) -> Iterator[tuple[str, str]]:

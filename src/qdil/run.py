@@ -8,8 +8,7 @@ from typing import Any
 import lightning as L
 import numpy as np
 import torch
-from ribs.archives import ArchiveBase, k_means_centroids
-from ribs.schedulers import Scheduler
+from ribs.archives import k_means_centroids
 
 from qdil.config import (
     BonusConfig,
@@ -35,15 +34,14 @@ from qdil.qd.archives import (
     make_cvt,
     make_grid,
 )
-from qdil.qd.emitter import PPGAEmitter
 from qdil.qd.scoring import Scorer
-from qdil.qd.seats import GradientEstimator, SearchEmitter, SearchScheduler
+from qdil.qd.search import make_search, search_emitters
+from qdil.qd.seats import GradientEstimator, Scheduler
 from qdil.qd.state import LoopState, Run
 from qdil.rewards.base import RewardModel
 from qdil.rewards.bonus import ExplorationBonus
 from qdil.rewards.ebc import EBCBonus
 from qdil.rl.networks import VectorizedActor
-from qdil.rl.normalize import RunningMeanStd
 from qdil.tracking import Tracker
 
 
@@ -165,45 +163,17 @@ def _archives(
     )
 
 
-def _search(
-    qd: QDConfig, main: ArchiveBase, x0: np.ndarray, obs_dim: int, seed: int
-) -> tuple[SearchEmitter, SearchScheduler]:
-    """The search emitter that walks from ``x0`` and the scheduler over ``main``.
-
-    The recipe schema has checked that the classes fill their seats (:mod:`qdil.qd.seats`).
-
-    Args:
-        qd: The recipe's ``qd`` section (an emitter or scheduler other than the default).
-        main: The CMA-MAE archive the emitter and scheduler insert into.
-        x0: The first search policy, a ``(solution_dim,)`` array.
-        obs_dim: Observation size: θ's observation statistics start empty.
-        seed: The emitter's seed.
-    """
-    theta_stats = RunningMeanStd(1, (obs_dim,))
-    emitter = (PPGAEmitter if qd.emitter is None else qd.emitter)(main, x0, seed=seed)
-    emitter.theta_fields = {
-        "obs_mean": theta_stats.mean[0].numpy(),
-        "obs_var": theta_stats.var[0].numpy(),
-        "obs_count": theta_stats.count[0].numpy(),
-    }
-    scheduler = (
-        Scheduler(main, [emitter], add_mode="batch")
-        if qd.scheduler is None
-        else qd.scheduler(main, [emitter])
-    )
-    return emitter, scheduler
-
-
 def _eval_size(
-    env: EnvConfig, qd: QDConfig, emitter: SearchEmitter, estimator: GradientEstimator
+    env: EnvConfig, qd: QDConfig, scheduler: Scheduler, estimator: GradientEstimator | None
 ) -> int:
     """How many simulations the evaluation environment holds (``env.eval_envs`` if set).
 
     A device scores θ_μ and the branches side by side (fewer steps in sequence); the C
     engine plays them one after the other, so its environment fits the larger of the two.
     An estimator that plays episodes itself (``eval_slots``: ES gradients) plays them alone.
+    Without an estimator every emitter's solutions play together (a bandit's whole pool).
     """
-    branch_slots = emitter.batch_size * qd.branch_episodes
+    branch_slots = sum(e.batch_size for e in search_emitters(scheduler)) * qd.branch_episodes
     own = int(getattr(estimator, "eval_slots", 0))
     if env.eval_envs and env.eval_envs < own:
         raise ValueError(
@@ -212,6 +182,8 @@ def _eval_size(
         )
     if env.eval_envs:
         return env.eval_envs
+    if estimator is None:
+        return branch_slots
     if env.backend in DEVICE_BACKENDS:
         return max(branch_slots + qd.mean_episodes, own)
     return max(branch_slots, qd.mean_episodes, own)
@@ -277,7 +249,7 @@ def _demos(model: RewardModel, demos: DemoConfig, task: str) -> DemoSet | None:
 def set_up_policies(
     train_env: LocomotionVectorEnv,
     eval_env: LocomotionVectorEnv,
-    estimator: GradientEstimator,
+    estimator: GradientEstimator | None,
     policy: PolicyConfig | None = None,
     executor: Executor | None = None,
     seed: int = 0,
@@ -287,7 +259,7 @@ def set_up_policies(
     Args:
         train_env: the estimator's ``SAME_STEP`` simulations.
         eval_env: the evaluations' ``DISABLED`` simulations, on the same device.
-        estimator: the gradient estimator to set up.
+        estimator: the gradient estimator to set up (``None``: gradient-free emitters).
         policy: the policy family (default: the paper's).
         executor: who steps the simulations (default: here, :class:`LocalExecutor`).
         seed: seeds the action noise and the estimator.
@@ -299,7 +271,8 @@ def set_up_policies(
     executor = LocalExecutor() if executor is None else executor
     executor.setup(train_env, eval_env, policy.obs_clip)
     noise = torch.Generator(device=train_env.device).manual_seed(seed)
-    estimator.setup(train_env, executor, policy, noise, seed)
+    if estimator is not None:
+        estimator.setup(train_env, executor, policy, noise, seed)
     return executor, Scorer(executor, train_env, policy, noise), noise
 
 
@@ -309,7 +282,7 @@ def build_run(
     run_dir: Path,
     seed: int,
     env: EnvConfig,
-    rl: GradientEstimator,
+    rl: GradientEstimator | None,
     reward: RewardFactory,
     bonus: BonusConfig,
     demos: DemoConfig,
@@ -350,12 +323,17 @@ def build_run(
 
     archives = _archives(qd, solution_dim, obs_dim, train_env.num_feet, archive_seed, run_dir)
     x0 = VectorizedActor.initial_solution(obs_dim, action_dim, policy.hidden, x0_seed)
-    emitter, scheduler = _search(qd, archives.main, x0, obs_dim, emitter_seed)
+    emitter, scheduler = make_search(qd, archives.main, x0, obs_dim, emitter_seed, rl is not None)
 
-    eval_env = _environment(env, _eval_size(env, qd, emitter, rl), "Disabled", device)
+    eval_env = _environment(env, _eval_size(env, qd, scheduler, rl), "Disabled", device)
     executor, scorer, noise = set_up_policies(train_env, eval_env, rl, policy, executor, rl_seed)
 
     model, optimizers, fabric = _reward_model(reward, bonus, archives, train_env)
+    if rl is None and model.needs_log_probs:
+        raise ValueError(
+            "rl: null: the reward model needs log-probs of the policy it rewards (AIRL), "
+            "which gradient-free emitters do not have (no one policy acts); use an estimator"
+        )
     demo_set = _demos(model, demos, env.task)
     model.setup(demo_set)
     if not resume:  # a resumed run's checkpoint holds the pretrained weights

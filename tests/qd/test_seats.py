@@ -8,11 +8,19 @@ from pathlib import Path
 
 import pytest
 from ribs.emitters import EvolutionStrategyEmitter
-from ribs.schedulers import BanditScheduler, Scheduler
+from ribs.schedulers import BanditScheduler
+from ribs.schedulers import Scheduler as PyribsScheduler
 
 from qdil.cli import main
 from qdil.qd import VPPO, XNES, PPGAEmitter
-from qdil.qd.seats import GradientEstimator, SearchEmitter, SearchScheduler, seat_problem
+from qdil.qd.seats import (
+    Emitter,
+    GradientEstimator,
+    Scheduler,
+    SearchEmitter,
+    SearchScheduler,
+    seat_problem,
+)
 
 ROOT = Path(__file__).resolve().parents[2]
 SMOKE = ROOT / "recipes" / "smoke" / "walker_true.yaml"
@@ -56,7 +64,7 @@ class DelegatingEstimator:
 def test_qdils_and_pyribs_classes_fill_the_seats_they_fit() -> None:
     assert issubclass(VPPO, GradientEstimator) and issubclass(DelegatingEstimator, VPPO) is False
     assert issubclass(DelegatingEstimator, GradientEstimator)
-    assert issubclass(PPGAEmitter, SearchEmitter) and issubclass(Scheduler, SearchScheduler)
+    assert issubclass(PPGAEmitter, SearchEmitter) and issubclass(PyribsScheduler, SearchScheduler)
     # a gradient-free pyribs emitter has no search policy to walk; the bandit scheduler keeps
     # its emitters in a pool
     assert SearchEmitter.lacking(EvolutionStrategyEmitter) == [
@@ -66,6 +74,10 @@ def test_qdils_and_pyribs_classes_fill_the_seats_they_fit() -> None:
         "coefficient_mean",
     ]
     assert SearchScheduler.lacking(BanditScheduler) == ["emitters"]
+    # without an estimator they fit: pyribs' ask/tell is all the loop calls then
+    assert issubclass(EvolutionStrategyEmitter, Emitter) and issubclass(PPGAEmitter, Emitter)
+    assert issubclass(BanditScheduler, Scheduler) and not issubclass(XNES, Emitter)
+    assert seat_problem("qd.scheduler", BanditScheduler) is None
     assert not issubclass(XNES, GradientEstimator)
     assert seat_problem("reward", XNES) is None  # not a seat's key
 
@@ -79,8 +91,10 @@ def test_qdils_and_pyribs_classes_fill_the_seats_they_fit() -> None:
          "ribs.emitters._evolution_strategy_emitter.EvolutionStrategyEmitter is not a search "
          "emitter: it lacks propose, theta, theta_fields, coefficient_mean"),
         ("--qd.scheduler", "ribs.schedulers.BanditScheduler", "qd.scheduler: "
-         "ribs.schedulers._bandit_scheduler.BanditScheduler is not a scheduler: it lacks "
-         "emitters"),
+         "ribs.schedulers._bandit_scheduler.BanditScheduler is not a search scheduler: it "
+         "lacks emitters (a gradient-free one runs with rl: null)"),
+        ("--qd.emitter", "qdil.qd.XNES", "qd.emitter: qdil.qd.xnes.XNES is not a search "
+         "emitter"),
     ],
 )  # fmt: skip
 def test_a_class_that_does_not_fill_its_seat_is_refused_naming_what_it_lacks(

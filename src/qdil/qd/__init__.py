@@ -1,8 +1,9 @@
-"""The quality-diversity side: seats, archives, emitter, xNES, estimators (VPPO, ES), loop."""
+"""The quality-diversity side: seats, archives, emitters, xNES, estimators (VPPO, ES), loop."""
 
 from qdil.qd.emitter import PPGAEmitter
+from qdil.qd.es_emitter import EvolutionStrategyEmitter
 from qdil.qd.es_gradients import ESGradients
 from qdil.qd.vppo import VPPO
 from qdil.qd.xnes import XNES
 
-__all__ = ["VPPO", "XNES", "ESGradients", "PPGAEmitter"]
+__all__ = ["VPPO", "XNES", "ESGradients", "EvolutionStrategyEmitter", "PPGAEmitter"]

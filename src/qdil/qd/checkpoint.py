@@ -146,7 +146,7 @@ def save_checkpoint(run: Run) -> Path:
         "scheduler": dumps_compact(run.scheduler),
         "true_archive": dumps_compact(run.archives.true),
         "deployable_archive": dumps_compact(run.archives.deployable),
-        "rl": run.estimator.state_dict(),
+        "rl": run.estimator.state_dict() if run.estimator is not None else {},
         "noise": run.noise.get_state(),
         "reward": {
             "class": f"{type(reward).__module__}.{type(reward).__qualname__}",
@@ -221,7 +221,8 @@ def load_checkpoint(run: Run, state: dict[str, Any] | None = None) -> None:
     run.state.rng.bit_generator.state = state["rng"]
     torch.set_rng_state(state["torch_rng"])
     run.scheduler = scheduler
-    run.emitter = run.scheduler.emitters[0]
+    if run.estimator is not None:
+        run.emitter = run.scheduler.emitters[0]
     run.archives.main = run.scheduler.archive
     run.archives.true = pickle.loads(state["true_archive"])
     if "deployable_archive" in state:
@@ -234,7 +235,8 @@ def load_checkpoint(run: Run, state: dict[str, Any] | None = None) -> None:
         )
     # checkpoints before the seats (issue 48) kept both under "vppo"
     estimator_state = state["rl"] if "rl" in state else state["vppo"]
-    run.estimator.load_state_dict(estimator_state)
+    if run.estimator is not None:
+        run.estimator.load_state_dict(estimator_state)
     run.noise.set_state(state["noise"] if "noise" in state else estimator_state["generator"])
     run.reward.load_state_dict(state["reward"]["state_dict"])
     for optimizer, opt_state in zip(

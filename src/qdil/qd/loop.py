@@ -37,6 +37,7 @@ from qdil.config import finished
 from qdil.data import Rollout, TransitionBatch
 from qdil.qd.archives import QD_OFFSETS, qd_metrics
 from qdil.qd.checkpoint import save_checkpoint
+from qdil.qd.search import search_emitters
 from qdil.reductions import sum_over
 from qdil.rl.episodes import Evaluation
 from qdil.rl.normalize import RunningMeanStd
@@ -129,7 +130,12 @@ def _objective(run: Run, evaluation: Evaluation) -> np.ndarray:
 
 
 def qd_iteration(run: Run) -> dict[str, float]:
-    """One iteration of Algorithm 1; returns its metrics."""
+    """One iteration of Algorithm 1; returns its metrics.
+
+    Without an estimator (``rl: null``) one of :func:`gradient_free_iteration` instead.
+    """
+    if run.estimator is None:
+        return gradient_free_iteration(run)
     state, estimator, scheduler, emitter = run.state, run.estimator, run.scheduler, run.emitter
     train_reward, eval_reward = reward_functions(run)
     qd = run.qd
@@ -195,14 +201,96 @@ def qd_iteration(run: Run) -> dict[str, float]:
         logp = partial(run.scorer.log_probs, walk.solutions[0], walk.stats)
         expert = replace(expert, log_probs=logp(expert.obs, expert.actions))
         policy = replace(policy, log_probs=logp(policy.obs, policy.actions))
-    reward_metrics = run.reward.update(expert, policy, state.iteration)
-    for key, value in reward_metrics.items():
-        run.reward.check_finite(torch.as_tensor(value), f"update metric {key}", state.iteration)
+    reward_metrics = _update_reward(run, expert, policy)
     timings["reward_update"] = time.perf_counter() - tic_reward
 
     # ---- 5. metrics
-    seconds = time.perf_counter() - tic
     steps = jacobian_phase.env_steps + walk.env_steps + mean_eval.env_steps + evaluation.env_steps
+    metrics = _common_metrics(run, steps, tic, reward_metrics, train_reward)
+    metrics |= {f"rl/jacobian_{k}": v for k, v in jacobian_phase.diagnostics.items()}
+    metrics |= {f"rl/walk_{k}": v for k, v in walk.diagnostics.items()}
+    metrics |= {
+        "search/objective": float(_objective(run, mean_eval)[0]),
+        "search/true_objective": float(mean_eval.true_objective[0]),
+        "emitter/restarts": float(emitter.restarts),
+        "emitter/restarted": float(emitter.restarts > restarts),
+        "emitter/improved": float(getattr(emitter, "last_improved", np.nan)),
+    }
+    for j, value in enumerate(mean_eval.measures[0]):
+        metrics[f"search/measure_{j}"] = float(value)
+    for j, value in enumerate(emitter.coefficient_mean):
+        metrics[f"emitter/coefficient_{j}"] = float(value)
+    metrics |= {f"perf/{k}_seconds": v for k, v in timings.items()}
+    return metrics
+
+
+def gradient_free_iteration(run: Run) -> dict[str, float]:
+    """One iteration without an estimator (``rl: null``: sep-CMA-MAE); returns its metrics.
+
+    The scheduler's emitters ask for solutions, the scorer plays them (observation
+    statistics of θ_0, never updated: no episode trains them), the scheduler tells them
+    the results; the reward model updates on these evaluation episodes, whose visits the
+    bonus counts.
+    """
+    state, scheduler, qd = run.state, run.scheduler, run.qd
+    train_reward, eval_reward = reward_functions(run)
+    tic = time.perf_counter()
+    solutions = scheduler.ask()
+    stats = RunningMeanStd(len(solutions), (run.scorer.obs_dim,))
+    rollouts: list[Rollout] = []
+
+    def recorded(rollout: Rollout) -> torch.Tensor:
+        rollouts.append(rollout)
+        return eval_reward(rollout)
+
+    evaluation = run.scorer.evaluate(
+        solutions,
+        stats,
+        qd.branch_episodes,
+        state.next_seed(),
+        None if eval_reward is None else recorded,
+        qd.deterministic_eval,
+    )
+    fields = fields_from_stats(stats, evaluation.lengths)
+    objective = _objective(run, evaluation)
+    with quiet_empty_archive():
+        scheduler.tell(objective, evaluation.measures, **fields)
+    run.archives.add(solutions, objective, evaluation.true_objective, evaluation.measures, fields)
+
+    reward_metrics: dict[str, float] = {}
+    if rollouts:  # a learned reward: count the visits, then learn from the episodes
+        for rollout in rollouts:
+            train_reward(rollout)
+        policy = TransitionBatch.cat([r.transitions() for r in rollouts])
+        reward_metrics = _update_reward(run, run.expert, policy)
+    metrics = _common_metrics(run, evaluation.env_steps, tic, reward_metrics, train_reward)
+    emitters = search_emitters(scheduler)
+    metrics |= {
+        "search/objective": float(np.max(objective)),
+        "search/true_objective": float(np.max(evaluation.true_objective)),
+        "emitter/restarts": float(sum(getattr(e, "restarts", 0) for e in emitters)),
+    }
+    return metrics
+
+
+def _update_reward(run: Run, expert: Any, policy: TransitionBatch) -> dict[str, float]:
+    """The reward model's once-per-iteration update (decision D3), its metrics checked finite."""
+    reward_metrics = run.reward.update(expert, policy, run.state.iteration)
+    for key, value in reward_metrics.items():
+        run.reward.check_finite(torch.as_tensor(value), f"update metric {key}", run.state.iteration)
+    return reward_metrics
+
+
+def _common_metrics(
+    run: Run,
+    steps: int,
+    tic: float,
+    reward_metrics: dict[str, float],
+    train_reward: TrainReward,
+) -> dict[str, float]:
+    """The archives', reward's and throughput's metrics of an iteration begun at ``tic``."""
+    state = run.state
+    seconds = time.perf_counter() - tic
     state.env_steps += steps
     state.seconds += seconds
     offset = QD_OFFSETS.get(run.task, 0.0)
@@ -211,8 +299,6 @@ def qd_iteration(run: Run) -> dict[str, float]:
         metrics |= {
             f"qd_learned/{k}": v for k, v in qd_metrics(run.archives.deployable, offset).items()
         }
-    metrics |= {f"rl/jacobian_{k}": v for k, v in jacobian_phase.diagnostics.items()}
-    metrics |= {f"rl/walk_{k}": v for k, v in walk.diagnostics.items()}
     returns, _ = run.executor.pop_episode_stats()
     if returns:
         metrics["rl/train_episode_return"] = float(np.mean(returns))
@@ -222,21 +308,11 @@ def qd_iteration(run: Run) -> dict[str, float]:
         metrics["reward/train_per_step"] = train_reward.per_step
         metrics.setdefault("reward/learned_per_step", train_reward.per_step)
     metrics |= {
-        "search/objective": float(_objective(run, mean_eval)[0]),
-        "search/true_objective": float(mean_eval.true_objective[0]),
-        "emitter/restarts": float(emitter.restarts),
-        "emitter/restarted": float(emitter.restarts > restarts),
-        "emitter/improved": float(getattr(emitter, "last_improved", np.nan)),
         "perf/env_steps": float(state.env_steps),
         "perf/sps": steps / seconds,
         "perf/iter_seconds": seconds,
         "perf/elapsed_seconds": state.seconds,
     }
-    for j, value in enumerate(mean_eval.measures[0]):
-        metrics[f"search/measure_{j}"] = float(value)
-    for j, value in enumerate(emitter.coefficient_mean):
-        metrics[f"emitter/coefficient_{j}"] = float(value)
-    metrics |= {f"perf/{k}_seconds": v for k, v in timings.items()}
     return metrics
 
 

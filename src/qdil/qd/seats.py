@@ -89,6 +89,18 @@ class GradientEstimator(Seat):
     members = ("setup", "compute_jacobian", "walk", "state_dict", "load_state_dict")
 
 
+class Emitter(Seat):
+    """pyribs' emitter duties: ``ask`` solutions, ``tell`` their results (gradient-free).
+
+    With ``rl: null`` the loop scores whatever the scheduler's emitters ask for and tells
+    them (``ribs.emitters.EvolutionStrategyEmitter``: sep-CMA-MAE); with a gradient
+    estimator the emitter must also be a :class:`SearchEmitter`.
+    """
+
+    title = "emitter"
+    members = ("archive", "batch_size", "ask", "tell")
+
+
 class SearchEmitter(Seat):
     """A DQD emitter with one search policy θ_μ that the estimator walks (PPGA's).
 
@@ -115,15 +127,26 @@ class SearchEmitter(Seat):
     )
 
 
-class SearchScheduler(Seat):
-    """Asks the emitters for solutions and tells them the results (pyribs' ``Scheduler``).
+class Scheduler(Seat):
+    """Asks its emitters for solutions and tells them the results, inserting into ``archive``.
 
-    The loop calls ``ask_dqd()``, ``tell_dqd(objective, measures, jacobian, **fields)``,
-    ``ask()`` and ``tell(objective, measures, **fields)``; checkpoints pickle it with its
-    ``archive`` and ``emitters``.
+    pyribs' ``Scheduler`` and ``BanditScheduler`` (which keeps a pool of emitters and asks
+    the ones a bandit chooses) both fit; checkpoints pickle it with its archive and emitters.
     """
 
     title = "scheduler"
+    members = ("archive", "ask", "tell")
+
+
+class SearchScheduler(Seat):
+    """A scheduler of one search emitter that routes the DQD calls too (pyribs' ``Scheduler``).
+
+    The loop with a gradient estimator calls ``ask_dqd()``, ``tell_dqd(objective, measures,
+    jacobian, **fields)``, ``ask()`` and ``tell(objective, measures, **fields)``, and finds
+    the search emitter in ``emitters``.
+    """
+
+    title = "search scheduler"
     members = ("archive", "emitters", "ask_dqd", "tell_dqd", "ask", "tell")
 
 
@@ -132,27 +155,33 @@ SearchArchive = ArchiveBase
 
 SEATS: dict[str, type[Seat]] = {
     "rl": GradientEstimator,
-    "qd.emitter": SearchEmitter,
-    "qd.scheduler": SearchScheduler,
+    "qd.emitter": Emitter,
+    "qd.scheduler": Scheduler,
 }
-"""The recipe keys whose classes fill a seat."""
+"""The recipe keys whose classes fill a seat (with an estimator, the search seats below)."""
+
+SEARCH_SEATS: dict[str, type[Seat]] = {"qd.emitter": SearchEmitter, "qd.scheduler": SearchScheduler}
+"""What the emitter and the scheduler must be beside a gradient estimator."""
 
 
-def seat_problem(key: str, candidate: object) -> str | None:
+def seat_problem(key: str, candidate: object, search: bool = False) -> str | None:
     """Why the class ``candidate`` cannot fill the seat at recipe ``key``, or None.
 
     Args:
         key: a recipe key of :data:`SEATS` (``rl``, ``qd.emitter``, ``qd.scheduler``).
         candidate: the class the recipe names there.
+        search: the run has a gradient estimator: the emitter and scheduler must fill
+            the search seats (:data:`SEARCH_SEATS`).
     """
-    seat = SEATS.get(key)
+    seat = (SEARCH_SEATS if search else {}).get(key) or SEATS.get(key)
     if seat is None or not isinstance(candidate, type):
         return None
     missing = seat.lacking(candidate)
     if not missing:
         return None
     name = f"{candidate.__module__}.{candidate.__qualname__}"
+    free = " (a gradient-free one runs with rl: null)" if search and key in SEARCH_SEATS else ""
     return (
-        f"{name} is not a {seat.title}: it lacks {', '.join(missing)} "
+        f"{name} is not a {seat.title}: it lacks {', '.join(missing)}{free} "
         f"(qdil.qd.seats.{seat.__name__} lists what the loop calls; docs/concepts/seats.md)"
     )

@@ -25,7 +25,7 @@ if TYPE_CHECKING:
     from qdil.executors.base import Executor
     from qdil.qd.archives import RunArchives
     from qdil.qd.scoring import Scorer
-    from qdil.qd.seats import GradientEstimator, SearchEmitter, SearchScheduler
+    from qdil.qd.seats import GradientEstimator, Scheduler, SearchEmitter
     from qdil.rewards.base import RewardModel
 
 
@@ -83,12 +83,14 @@ class Run:
     scorer: Scorer
     noise: torch.Generator
     """The run's action noise: the estimator's rollouts and the C engine's evaluations."""
-    estimator: GradientEstimator
+    estimator: GradientEstimator | None
+    """``None``: gradient-free emitters ask for every solution (``rl: null``)."""
     reward: RewardModel
     reward_optimizers: list[torch.optim.Optimizer]
     fabric: L.Fabric
-    scheduler: SearchScheduler
-    emitter: SearchEmitter
+    scheduler: Scheduler
+    emitter: SearchEmitter | None
+    """The search emitter the estimator walks (``None`` without an estimator)."""
     archives: RunArchives
     demos: DemoSet | None
     expert: TransitionBatch | None
