@@ -40,6 +40,7 @@ TINY = [
     "--logging.progress", "false",
     "--logging.videos", "0",
 ]  # fmt: skip
+ES_PAIRS = ["--rl.init_args.pairs", "2"]  # ES gradients: four perturbed policies
 ONE_MORE = ["--qd.iterations", "2"]  # a resumed tiny run: one iteration past its first
 NOTHING_RUNS = {"-h", "--help", "--print_config", "--reward.help"}
 # reward options that train offline before the first iteration (GIRIL's VAE: 10,000 passes
@@ -69,6 +70,27 @@ def pretraining(fit_argv: list[str]) -> list[str]:
     ]
 
 
+def fitted(argv: list[str]) -> list[str]:
+    """:data:`TINY` for the fit ``argv``: the estimator's options it has, or none (``rl: null``).
+
+    VPPO's options shorten VPPO; ES gradients play :data:`ES_PAIRS` pairs; gradient-free
+    emitters take no ``rl`` option.
+    """
+    from qdil.cli import parse_fit
+
+    try:
+        config, _, _ = parse_fit(argv)
+        init_args = getattr(config.rl, "init_args", None) if config.rl else None
+        options = set(init_args.as_dict()) if init_args else set()
+    except (SystemExit, Exception):  # a bad command: qdil itself says what is wrong
+        return TINY
+    tiny = []
+    for flag, value in zip(TINY[::2], TINY[1::2], strict=True):
+        if not flag.startswith("--rl.init_args.") or flag.rpartition(".")[2] in options:
+            tiny += [flag, value]
+    return [*tiny, *(ES_PAIRS if "pairs" in options else [])]
+
+
 def shortened(argv: list[str]) -> list[str]:
     """The ``qdil`` arguments ``argv`` with a tiny run's overrides appended to a fit or sweep."""
     if argv and argv[0] == "sweep" and not NOTHING_RUNS.intersection(argv):
@@ -78,7 +100,7 @@ def shortened(argv: list[str]) -> list[str]:
         return argv
     if "--resume" in argv:  # a resumed run does not pretrain again
         return [*argv, *ONE_MORE]
-    tiny = [*argv, *TINY]
+    tiny = [*argv, *fitted(argv[1:])]
     return [*tiny, *pretraining(tiny[1:])]
 
 

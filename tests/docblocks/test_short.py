@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.docblocks.short import ONE_MORE, TINY, enabled, shortened
+from tests.docblocks.short import ES_PAIRS, ONE_MORE, TINY, enabled, shortened
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -58,3 +58,16 @@ def test_the_short_overrides_parse_on_any_recipe(recipe: str) -> None:
 
     config, _, _ = parse_fit(shortened(["fit", str(ROOT / "recipes" / recipe)])[1:])
     assert (config.qd.iterations, config.env.num_envs, config.demos.num_episodes) == (1, 6, 1)
+
+
+def test_an_estimator_gets_the_options_it_has_and_none_without_one() -> None:
+    """VPPO's options do not reach ES gradients or a run without an estimator."""
+    for stem, extra in (("walker_cma_maega_es", ES_PAIRS), ("walker_sep_cma_mae", [])):
+        argv = ["fit", str(ROOT / f"recipes/{stem}.yaml")]
+        short = shortened(argv)
+        assert not any(a.startswith("--rl.init_args.") and a not in extra for a in short)
+        assert short[-len(extra) :] == extra if extra else short[-2:] == TINY[-2:]
+        from qdil.cli import parse_fit
+
+        config, _, _ = parse_fit(short[1:])
+        assert config.qd.iterations == 1

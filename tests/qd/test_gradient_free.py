@@ -8,8 +8,11 @@ import csv
 import pickle
 from pathlib import Path
 
+import numpy as np
 import pytest
 import torch
+from ribs.archives import GridArchive
+from ribs.emitters import EvolutionStrategyEmitter as RibsEvolutionStrategyEmitter
 from ribs.schedulers import BanditScheduler
 
 from qdil.cli import main
@@ -108,3 +111,44 @@ def test_the_baseline_recipes_name_the_gradient_free_seats() -> None:
             recipe = yaml.safe_load((ROOT / f"recipes/{task}_{stem}.yaml").read_text())
             assert recipe["rl"] is None and recipe["qd"]["env_steps"] > 0
             assert recipe["qd"]["emitter"]["init_args"]["es"] == "sep_cma_es"
+
+
+def _archive(threshold_min: float) -> GridArchive:
+    return GridArchive(
+        solution_dim=4, dims=[5, 5], ranges=[(0, 1)] * 2, learning_rate=0.1,
+        threshold_min=threshold_min, seed=1,
+    )  # fmt: skip
+
+
+def _emitters(cls: type, archive: GridArchive, **kwargs) -> object:
+    return cls(archive, x0=np.full(4, 0.5), sigma0=0.1, es="sep_cma_es", ranker="imp",
+               selection_rule="mu", batch_size=6, seed=3, **kwargs)  # fmt: skip
+
+
+def test_our_evolution_strategy_emitter_tells_as_pyribs_and_restarts_at_x0_while_empty(
+    rng,
+) -> None:
+    """With elites it is pyribs' emitter, step for step; with none, a restart goes to x0
+    where pyribs' samples an elite from the empty archive and fails."""
+    ours, theirs = _archive(0.0), _archive(0.0)
+    mine = _emitters(EvolutionStrategyEmitter, ours, restart_rule=2)
+    pyribs = _emitters(RibsEvolutionStrategyEmitter, theirs, restart_rule=2)
+    for _ in range(6):  # restarts every 2 iterations
+        solution = mine.ask()
+        np.testing.assert_array_equal(solution, pyribs.ask())
+        objective, measures = rng.uniform(1, 2, 6), rng.uniform(0, 1, (6, 2))
+        mine.tell(solution, objective, measures, ours.add(solution, objective, measures))
+        pyribs.tell(solution, objective, measures, theirs.add(solution, objective, measures))
+    assert mine.restarts == pyribs.restarts == 3
+
+    ours, theirs = _archive(100.0), _archive(100.0)  # nothing passes the threshold
+    mine = _emitters(EvolutionStrategyEmitter, ours, restart_rule="no_improvement")
+    pyribs = _emitters(RibsEvolutionStrategyEmitter, theirs, restart_rule="no_improvement")
+    solution = mine.ask()
+    np.testing.assert_array_equal(solution, pyribs.ask())
+    objective, measures = rng.uniform(1, 2, 6), rng.uniform(0, 1, (6, 2))
+    with pytest.raises(IndexError):
+        pyribs.tell(solution, objective, measures, theirs.add(solution, objective, measures))
+    mine.tell(solution, objective, measures, ours.add(solution, objective, measures))
+    assert mine.restarts == 1 and ours.empty
+    np.testing.assert_array_equal(mine._opt.mean, np.full(4, 0.5))

@@ -92,13 +92,15 @@ class GradientEstimator(Seat):
 class Emitter(Seat):
     """pyribs' emitter duties: ``ask`` solutions, ``tell`` their results (gradient-free).
 
+    pyribs' schedulers also read ``archive`` (the one they insert into) and ``solution_dim``.
+
     With ``rl: null`` the loop scores whatever the scheduler's emitters ask for and tells
     them (``ribs.emitters.EvolutionStrategyEmitter``: sep-CMA-MAE); with a gradient
     estimator the emitter must also be a :class:`SearchEmitter`.
     """
 
     title = "emitter"
-    members = ("archive", "batch_size", "ask", "tell")
+    members = ("archive", "solution_dim", "batch_size", "ask", "tell")
 
 
 class SearchEmitter(Seat):
@@ -114,6 +116,7 @@ class SearchEmitter(Seat):
     title = "search emitter"
     members = (
         "archive",
+        "solution_dim",
         "batch_size",
         "ask_dqd",
         "tell_dqd",
