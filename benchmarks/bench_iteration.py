@@ -64,8 +64,8 @@ def instrument() -> None:
     from ribs.schedulers import Scheduler
 
     from qdil.envs import physics
-    from qdil.qd import archives, loop
-    from qdil.rl import collect, vppo
+    from qdil.qd import archives, loop, vppo
+    from qdil.rl import collect
 
     timed(physics.MujocoBatch, "step", "physics")
     timed(physics.MujocoBatch, "reset", "physics")
@@ -74,7 +74,7 @@ def instrument() -> None:
         timed(collect.PolicySampler, "sample", "policy inference")
     else:
         timed(collect, "act", "policy inference")
-    timed(vppo.VPPO, "_ppo_update", "PPO updates")
+    timed(vppo, "ppo_update", "PPO updates")  # the name VPPO's phases call
     for name in ("ask_dqd", "tell_dqd", "ask", "tell"):
         timed(Scheduler, name, "archive work")
     timed(archives.RunArchives, "add", "archive work")

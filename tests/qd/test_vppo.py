@@ -15,6 +15,7 @@ from qdil.qd.vppo import VPPO
 from qdil.rl.collect import Collector
 from qdil.rl.networks import VectorizedActor
 from qdil.rl.normalize import RunningMeanStd
+from qdil.rl.ppo import ppo_update
 from qdil.run import set_up_policies
 
 
@@ -134,7 +135,10 @@ def test_ppo_update_moves_the_policy_towards_higher_advantage() -> None:
         rewards = pdata.actions[..., 0]
         ones = torch.ones_like(rewards)
         rollout = dataclasses.replace(rollout, dones=ones, terminated=ones)
-        algo._ppo_update("walk", actor, optimizer, rollout, pdata, rewards)
+        ppo_update(
+            algo.ppo, algo.generator, actor, optimizer, algo.walk_critic, algo.walk_critic_opt,
+            algo.walk_returns, rollout, pdata, rewards,
+        )  # fmt: skip
     with torch.no_grad():
         assert float(actor(obs)[0, 0, 0]) > before + 0.05
 

@@ -2,23 +2,21 @@
 
 Reads top to bottom (CleanRL style): :meth:`VPPO.compute_jacobian` trains k+1 copies of
 θ_μ side by side, :meth:`VPPO.walk` moves θ_μ, both with the same PPO update
-(:func:`qdil.rl.ppo.ppo_update`); the run's executor steps the simulations. It fills the
-loop's :class:`~qdil.qd.seats.GradientEstimator` seat. Why each detail is as it is:
-``docs/concepts/vppo.md``.
+(:func:`qdil.rl.ppo.ppo_update`, its settings one object, ``self.ppo``); the run's executor
+steps the simulations. It fills the loop's :class:`~qdil.qd.seats.GradientEstimator` seat.
+Why each detail is as it is: ``docs/concepts/vppo.md``.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import fields
 from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
 
-from qdil.data import Rollout
 from qdil.qd.seats import PhaseResult
-from qdil.rl.collect import PolicyData, RewardFn
+from qdil.rl.collect import RewardFn
 from qdil.rl.networks import VectorizedActor, VectorizedCritic
 from qdil.rl.normalize import RunningMeanStd
 from qdil.rl.ppo import PPOSettings, ppo_update
@@ -113,6 +111,21 @@ class VPPO:
         self.adaptive_std = adaptive_std
         self.bootstrap_truncation = bootstrap_truncation
         self.critic_hidden = tuple(critic_hidden)
+        # what one PPO iteration reads, in one object (the learning rate builds the optimisers)
+        self.ppo = PPOSettings(
+            gamma=gamma,
+            gae_lambda=gae_lambda,
+            num_minibatches=num_minibatches,
+            update_epochs=update_epochs,
+            clip_coef=clip_coef,
+            value_clip=value_clip,
+            vf_coef=vf_coef,
+            ent_coef=ent_coef,
+            max_grad_norm=max_grad_norm,
+            target_kl=target_kl,
+            normalize_returns=normalize_returns,
+            bootstrap_truncation=bootstrap_truncation,
+        )
 
     # ------------------------------------------------------------------ setup
     def setup(
@@ -214,8 +227,11 @@ class VPPO:
                 copy_j = slice(j * block, (j + 1) * block)
                 rewards[:, copy_j] = rollout.next_contacts[:, copy_j, j - 1]
             diagnostics.append(
-                self._ppo_update("jacobian", actor, actor_opt, rollout, pdata, rewards)
-            )
+                ppo_update(
+                    self.ppo, self.generator, actor, actor_opt, self.jacobian_critic,
+                    self.jacobian_critic_opt, self.jacobian_returns, rollout, pdata, rewards,
+                )
+            )  # fmt: skip
             rollouts.append(f_rollout)
         steps = self.jacobian_iterations * self.rollout_length * self.train_env.num_envs
         return PhaseResult(actor.get_solutions(), copies_stats, rollouts, _mean(diagnostics), steps)
@@ -251,33 +267,15 @@ class VPPO:
                 actor, stats, self.rollout_length, self.generator, update_stats=True
             )
             rewards = c[0] * reward_fn(rollout) + (rollout.next_contacts * c[1:]).sum(-1)
-            diagnostics.append(self._ppo_update("walk", actor, actor_opt, rollout, pdata, rewards))
+            diagnostics.append(
+                ppo_update(
+                    self.ppo, self.generator, actor, actor_opt, self.walk_critic,
+                    self.walk_critic_opt, self.walk_returns, rollout, pdata, rewards,
+                )
+            )  # fmt: skip
             rollouts.append(rollout)
         steps = self.walk_iterations * self.rollout_length * self.train_env.num_envs
         return PhaseResult(actor.get_solutions(), stats, rollouts, _mean(diagnostics), steps)
-
-    # ---------------------------------------------------------------- PPO core
-    def _ppo_update(
-        self,
-        phase: str,
-        actor: VectorizedActor,
-        actor_opt: torch.optim.Optimizer,
-        rollout: Rollout,
-        pdata: PolicyData,
-        rewards: torch.Tensor,
-    ) -> dict[str, float]:
-        """One PPO iteration (:func:`qdil.rl.ppo.ppo_update`) on (T, N) ``rewards``.
-
-        It trains the critic, critic optimiser and return statistics of ``phase``.
-        """
-        settings = PPOSettings(**{f.name: getattr(self, f.name) for f in fields(PPOSettings)})
-        critic, critic_opt, return_stats = (
-            getattr(self, f"{phase}_{x}") for x in ("critic", "critic_opt", "returns")
-        )
-        return ppo_update(
-            settings, self.generator, actor, actor_opt, critic, critic_opt, return_stats,
-            rollout, pdata, rewards,
-        )  # fmt: skip
 
     # ------------------------------------------------------------ checkpoints
     def state_dict(self) -> dict:
