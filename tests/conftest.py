@@ -1,9 +1,13 @@
-"""Shared test settings: single-threaded torch, quiet W&B, fixed seeds."""
+"""Shared test settings (single-threaded torch, quiet W&B, fixed seeds) and shared fixtures:
+the test's own demonstrations, an OpenGL backend, a one-iteration smoke run."""
 
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 os.environ.setdefault("WANDB_MODE", "disabled")
@@ -74,3 +78,39 @@ def walker_demos(tmp_path_factory: pytest.TempPathFactory):
     path = tmp_path_factory.mktemp("demos") / "walker_tiny.npz"
     save_demos(demos, path, qpos, qvel)
     return path
+
+
+SMOKE = Path(__file__).resolve().parents[1] / "recipes" / "smoke" / "walker_true.yaml"
+"""PPGA on the true reward at the sizes of a test: a few seconds an iteration."""
+
+
+@pytest.fixture(scope="module")
+def gl() -> str:
+    """The OpenGL backend, or a skip that says why none renders here."""
+    from qdil.envs.gl import GLUnavailableError, use_gl_backend
+
+    try:
+        return use_gl_backend()
+    except GLUnavailableError as error:
+        pytest.skip(f"no OpenGL backend renders here: {error}")
+
+
+@pytest.fixture(scope="module")
+def smoke_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A one-iteration run of :data:`SMOKE` with a checkpoint, made by ``qdil fit`` in a
+    process of its own (no plugins, no W&B): its directory."""
+    root = tmp_path_factory.mktemp("smoke")
+    # no plugins: the run's folder has no ./plugins, and the variable is left out (a folder
+    # on it that does not exist is an error)
+    env = {k: v for k, v in os.environ.items() if k != "QDIL_PLUGIN_PATH"}
+    env["WANDB_MODE"] = "disabled"
+    quick = ["--qd.iterations", "1", "--name", "tiny"]
+    subprocess.run(
+        [sys.executable, "-m", "qdil.cli", "fit", str(SMOKE), *quick],
+        cwd=root,
+        env=env,
+        check=True,
+        capture_output=True,
+        timeout=900,
+    )
+    return root / "runs" / "tiny"

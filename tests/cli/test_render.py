@@ -8,10 +8,7 @@ Tests that draw skip, naming the reason, where no OpenGL backend renders (CI wit
 
 from __future__ import annotations
 
-import os
 import shutil
-import subprocess
-import sys
 from pathlib import Path
 
 import imageio.v2 as imageio
@@ -21,9 +18,7 @@ import pytest
 from qdil.cli import main
 
 ROOT = Path(__file__).resolve().parents[2]
-SMOKE = ROOT / "recipes" / "smoke" / "walker_true.yaml"
 STEPS = 30
-QUICK = ["--qd.iterations", "1", "--name", "tiny"]
 SMALL = ["--width", "96", "--height", "64", "--max-steps", str(STEPS)]
 
 
@@ -41,33 +36,9 @@ def cli(args: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, 
 
 
 @pytest.fixture(scope="module")
-def run_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A one-iteration Walker2d smoke run with a checkpoint."""
-    root = tmp_path_factory.mktemp("render")
-    # no plugins: the run's folder has no ./plugins, and the variable is left out (a folder
-    # on it that does not exist is an error)
-    env = {k: v for k, v in os.environ.items() if k != "QDIL_PLUGIN_PATH"}
-    env["WANDB_MODE"] = "disabled"
-    subprocess.run(
-        [sys.executable, "-m", "qdil.cli", "fit", str(SMOKE), *QUICK],
-        cwd=root,
-        env=env,
-        check=True,
-        capture_output=True,
-        timeout=900,
-    )
-    return root / "runs" / "tiny"
-
-
-@pytest.fixture(scope="module")
-def gl() -> str:
-    """The OpenGL backend, or a skip that says why none renders here."""
-    from qdil.envs.gl import GLUnavailableError, use_gl_backend
-
-    try:
-        return use_gl_backend()
-    except GLUnavailableError as error:
-        pytest.skip(f"no OpenGL backend renders here: {error}")
+def run_dir(smoke_run: Path) -> Path:
+    """A one-iteration Walker2d smoke run with a checkpoint (conftest's)."""
+    return smoke_run
 
 
 def frames_of(path: Path) -> np.ndarray:

@@ -15,17 +15,6 @@ from qdil.envs.vector import LocomotionVectorEnv
 STEPS = 20
 
 
-@pytest.fixture(scope="module")
-def gl() -> str:
-    """The OpenGL backend, or a skip that says why none renders here."""
-    from qdil.envs.gl import GLUnavailableError, use_gl_backend
-
-    try:
-        return use_gl_backend()
-    except GLUnavailableError as error:
-        pytest.skip(f"no OpenGL backend renders here: {error}")
-
-
 def rollout(env, actions: np.ndarray, render: bool) -> tuple[list, list]:
     """Everything the environment returns over ``actions``, and the frames drawn."""
     seen, frames = [env.reset(seed=3)], []

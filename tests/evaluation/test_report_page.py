@@ -11,10 +11,7 @@ from __future__ import annotations
 
 import html
 import itertools
-import os
 import re
-import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -30,40 +27,16 @@ from qdil.evaluation.gallery import VideoSettings
 from qdil.evaluation.report import write_report
 
 ROOT = Path(__file__).resolve().parents[2]
-SMOKE = ROOT / "recipes" / "smoke" / "walker_true.yaml"
 STEPS = 30
-QUICK = ["--qd.iterations", "1", "--name", "tiny"]
 SMALL = VideoSettings(count=2, width=96, height=64, max_steps=STEPS)
 RECT = re.compile(r"<rect ([^>]*)>")
 ATTRIBUTE = re.compile(r'([\w-]+)="([^"]*)"')
 
 
 @pytest.fixture(scope="module")
-def run_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A one-iteration Walker2d smoke run with a checkpoint."""
-    root = tmp_path_factory.mktemp("page")
-    env = {k: v for k, v in os.environ.items() if k != "QDIL_PLUGIN_PATH"}  # no plugins
-    env["WANDB_MODE"] = "disabled"
-    subprocess.run(
-        [sys.executable, "-m", "qdil.cli", "fit", str(SMOKE), *QUICK],
-        cwd=root,
-        env=env,
-        check=True,
-        capture_output=True,
-        timeout=900,
-    )
-    return root / "runs" / "tiny"
-
-
-@pytest.fixture(scope="module")
-def gl() -> str:
-    """The OpenGL backend, or a skip that says why none renders here."""
-    from qdil.envs.gl import GLUnavailableError, use_gl_backend
-
-    try:
-        return use_gl_backend()
-    except GLUnavailableError as error:
-        pytest.skip(f"no OpenGL backend renders here: {error}")
+def run_dir(smoke_run: Path) -> Path:
+    """A one-iteration Walker2d smoke run with a checkpoint (conftest's)."""
+    return smoke_run
 
 
 @pytest.fixture(scope="module")
