@@ -112,6 +112,13 @@ def check_values(config: Namespace) -> list[str]:
     bonus = config.get("bonus")
     if isinstance(bonus, Namespace):
         problems += BonusConfig(**bonus.as_dict()).problems()
+    if config.get("rl") is not None:  # beside an estimator: the search seats
+        for key in ("qd.emitter", "qd.scheduler"):
+            chosen = config.get(key)
+            path = chosen.get("class_path") if isinstance(chosen, Namespace) else None
+            problem = isinstance(path, str) and seat_problem(key, _imported(path), search=True)
+            if problem:
+                problems.append(f"{key}: {problem}")
     reward = config.get("reward")
     path = reward.get("class_path") if isinstance(reward, Namespace) else None
     if isinstance(path, str):
