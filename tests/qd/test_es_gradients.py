@@ -3,12 +3,12 @@ from YAML (resumed bit for bit, the reward model trained on the perturbation epi
 
 from __future__ import annotations
 
-import csv
 import math
 from pathlib import Path
 
 import numpy as np
 import pytest
+from run_rows import rows
 
 from qdil.cli import main
 from qdil.qd import ESGradients
@@ -67,14 +67,6 @@ def test_the_walk_steps_along_the_estimate_and_not_from_a_restarted_theta(rng) -
 def test_a_bad_setting_is_named(key: str, value: float) -> None:
     with pytest.raises(ValueError, match=rf"rl\.{key}"):
         ESGradients(**{key: value})
-
-
-def rows(run_dir: Path) -> list[dict[str, str]]:
-    with open(run_dir / "metrics.csv", newline="") as file:
-        return [
-            {k: v for k, v in row.items() if not k.startswith("perf/") or k == "perf/env_steps"}
-            for row in csv.DictReader(file)
-        ]
 
 
 def test_cma_maega_es_from_yaml_imitates_and_resumes_bit_for_bit(

@@ -4,7 +4,6 @@ is refused naming the key."""
 
 from __future__ import annotations
 
-import csv
 import pickle
 from pathlib import Path
 
@@ -14,6 +13,7 @@ import torch
 from ribs.archives import GridArchive
 from ribs.emitters import EvolutionStrategyEmitter as RibsEvolutionStrategyEmitter
 from ribs.schedulers import BanditScheduler
+from run_rows import rows
 
 from qdil.cli import main
 from qdil.qd import EvolutionStrategyEmitter
@@ -29,14 +29,6 @@ SEP = [
     "--qd.emitter.init_args.batch_size", "4",
     "--qd.emitters", "3",
 ]  # fmt: skip
-
-
-def rows(run_dir: Path) -> list[dict[str, str]]:
-    with open(run_dir / "metrics.csv", newline="") as file:
-        return [
-            {k: v for k, v in row.items() if not k.startswith("perf/") or k == "perf/env_steps"}
-            for row in csv.DictReader(file)
-        ]
 
 
 def straight_and_resumed(common: list[str]) -> list[dict[str, str]]:

@@ -3,13 +3,13 @@ and the loop calls nothing of an estimator beyond its seat."""
 
 from __future__ import annotations
 
-import csv
 from pathlib import Path
 
 import pytest
 from ribs.emitters import EvolutionStrategyEmitter
 from ribs.schedulers import BanditScheduler
 from ribs.schedulers import Scheduler as PyribsScheduler
+from run_rows import rows
 
 from qdil.cli import main
 from qdil.qd import VPPO, XNES, PPGAEmitter
@@ -106,14 +106,6 @@ def test_a_class_that_does_not_fill_its_seat_is_refused_naming_what_it_lacks(
     message = str(refused.value.code)
     assert words in message and "docs/concepts/seats.md" in message, message
     assert not (tmp_path / "runs").exists()
-
-
-def rows(run_dir: Path) -> list[dict[str, str]]:
-    with open(run_dir / "metrics.csv", newline="") as file:
-        return [
-            {k: v for k, v in row.items() if not k.startswith("perf/") or k == "perf/env_steps"}
-            for row in csv.DictReader(file)
-        ]
 
 
 def test_an_estimator_that_only_fills_its_seat_runs_the_loop_as_vppo(
