@@ -156,3 +156,29 @@ def test_a_sweep_on_a_two_node_cluster_equals_the_plain_fits(plain, tmp_path) ->
             assert same_runs(run, plain / f"walker_true-seed{seed}")
     finally:
         cluster.shutdown()
+
+
+def test_half_a_gpu_per_trial_packs_two_trials_onto_one_gpu(plain, tmp_path) -> None:
+    """Ray told of one GPU (none is needed: the smoke recipe runs on the CPU): two trials of
+    half a GPU each run at the same time, both given GPU 0, and equal the plain fits."""
+    import json
+
+    if ray.is_initialized():  # the other tests' Ray has no GPU
+        ray.shutdown()
+    ray.init(num_cpus=2, num_gpus=1, include_dashboard=False, log_to_driver=False)
+    try:
+        root = tmp_path / "runs"
+        command = ["sweep", str(SMOKE), "--seeds", "0", "1", "--root", str(root)]
+        main([*command, "--gpus-per-trial", "0.5", "--episodes", "0"])
+    finally:
+        ray.shutdown()
+    spans = []
+    for seed in ("0", "1"):
+        assert same_runs(root / f"walker_true-seed{seed}", plain / f"walker_true-seed{seed}")
+        log = (root / ".locks" / f"walker_true-seed{seed}.log").read_text()
+        assert "CUDA_VISIBLE_DEVICES=0, GPU share 0.5" in log, log
+    for result in (root / ".tune").glob("*/*/result.json"):
+        stamps = [json.loads(line)["timestamp"] for line in result.read_text().splitlines()]
+        spans.append((min(stamps), max(stamps)))
+    assert len(spans) == 2
+    assert max(start for start, _ in spans) <= min(end for _, end in spans)  # at once

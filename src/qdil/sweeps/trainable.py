@@ -88,6 +88,8 @@ def run_command(args: list[str], lock: int, threads: int, log: Path, cwd: Path) 
     log.parent.mkdir(parents=True, exist_ok=True)
     with open(log, "ab") as out:
         out.write(f"$ qdil {' '.join(args)}\n".encode())
+        if os.environ.get("CUDA_VISIBLE_DEVICES"):  # set by Ray for a trial given GPUs
+            out.write(f"# the GPUs Ray gave this trial: {_gpus()}\n".encode())
         out.flush()
         done = subprocess.run(
             [sys.executable, "-m", "qdil.cli", *args],
@@ -102,6 +104,18 @@ def run_command(args: list[str], lock: int, threads: int, log: Path, cwd: Path) 
     if done.returncode:
         tail = log.read_text(errors="replace")[-3000:]
         raise TrialError(f"qdil {args[0]} exited with {done.returncode}; its output ends:\n{tail}")
+
+
+def _gpus() -> str:
+    """``CUDA_VISIBLE_DEVICES`` and this trial's share of each GPU, as Ray assigned them."""
+    visible = os.environ.get("CUDA_VISIBLE_DEVICES", "")
+    try:
+        import ray
+
+        share = ray.get_runtime_context().get_assigned_resources().get("GPU")
+    except Exception:  # outside a Ray worker: the variable alone
+        share = None
+    return f"CUDA_VISIBLE_DEVICES={visible}" + (f", GPU share {share:g}" if share else "")
 
 
 def _cluster_address() -> str | None:
