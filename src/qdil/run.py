@@ -323,7 +323,10 @@ def build_run(
 
     archives = _archives(qd, solution_dim, obs_dim, train_env.num_feet, archive_seed, run_dir)
     x0 = VectorizedActor.initial_solution(obs_dim, action_dim, policy.hidden, x0_seed)
-    emitter, scheduler = make_search(qd, archives.main, x0, obs_dim, emitter_seed, rl is not None)
+    emitter, scheduler = make_search(
+        qd, archives.main, x0, obs_dim, [emitter_seed, *_seeds(emitter_seed, qd.emitters - 1)],
+        rl is not None,
+    )  # fmt: skip
 
     eval_env = _environment(env, _eval_size(env, qd, scheduler, rl), "Disabled", device)
     executor, scorer, noise = set_up_policies(train_env, eval_env, rl, policy, executor, rl_seed)

@@ -21,10 +21,6 @@ if TYPE_CHECKING:
     from qdil.config import QDConfig
 
 
-def _seeds(seed: int, count: int) -> list[int]:
-    return [int(s.generate_state(1)[0]) for s in np.random.SeedSequence(seed).spawn(count)]
-
-
 def search_emitters(scheduler: Scheduler) -> list[Emitter]:
     """Every emitter a scheduler may ask (pyribs' ``emitters``, or a bandit's pool)."""
     emitters = getattr(scheduler, "emitters", None)
@@ -32,7 +28,12 @@ def search_emitters(scheduler: Scheduler) -> list[Emitter]:
 
 
 def make_search(
-    qd: QDConfig, main: ArchiveBase, x0: np.ndarray, obs_dim: int, seed: int, search: bool
+    qd: QDConfig,
+    main: ArchiveBase,
+    x0: np.ndarray,
+    obs_dim: int,
+    seeds: list[int],
+    search: bool,
 ) -> tuple[SearchEmitter | None, Scheduler]:
     """The emitters that start from ``x0`` and the scheduler over ``main``.
 
@@ -45,7 +46,7 @@ def make_search(
         main: The CMA-MAE archive the emitters and scheduler insert into.
         x0: The first solution, a ``(solution_dim,)`` array.
         obs_dim: Observation size: θ's observation statistics start empty.
-        seed: The first emitter's seed (the others' derive from it).
+        seeds: One seed per emitter (``qd.emitters`` of them).
         search: The run has a gradient estimator, which walks one search emitter's θ_μ.
 
     Returns:
@@ -61,7 +62,6 @@ def make_search(
             "qd.emitters to 1, or rl to null for gradient-free emitters"
         )
     make = PPGAEmitter if qd.emitter is None else qd.emitter
-    seeds = [seed, *_seeds(seed, qd.emitters - 1)]
     emitters = [make(main, x0=x0, seed=s) for s in seeds]
     scheduler = (
         PyribsScheduler(main, emitters, add_mode="batch")
