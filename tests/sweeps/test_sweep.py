@@ -4,6 +4,7 @@ end, a bad override stops it before anything starts, and a crashed trial stops n
 from __future__ import annotations
 
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -161,8 +162,6 @@ def test_a_sweep_on_a_two_node_cluster_equals_the_plain_fits(plain, tmp_path) ->
 def test_half_a_gpu_per_trial_packs_two_trials_onto_one_gpu(plain, tmp_path) -> None:
     """Ray told of one GPU (none is needed: the smoke recipe runs on the CPU): two trials of
     half a GPU each run at the same time, both given GPU 0, and equal the plain fits."""
-    import json
-
     if ray.is_initialized():  # the other tests' Ray has no GPU
         ray.shutdown()
     ray.init(num_cpus=2, num_gpus=1, include_dashboard=False, log_to_driver=False)
@@ -177,8 +176,10 @@ def test_half_a_gpu_per_trial_packs_two_trials_onto_one_gpu(plain, tmp_path) -> 
         assert same_runs(root / f"walker_true-seed{seed}", plain / f"walker_true-seed{seed}")
         log = (root / ".locks" / f"walker_true-seed{seed}.log").read_text()
         assert "CUDA_VISIBLE_DEVICES=0, GPU share 0.5" in log, log
-    for result in (root / ".tune").glob("*/*/result.json"):
-        stamps = [json.loads(line)["timestamp"] for line in result.read_text().splitlines()]
-        spans.append((min(stamps), max(stamps)))
-    assert len(spans) == 2
-    assert max(start for start, _ in spans) <= min(end for _, end in spans)  # at once
+        # the trial's `qdil fit` (its first command): when it started and ended
+        stamps = [
+            float(unix)
+            for unix in re.findall(r"^# (?:started|ended) .*\(unix ([\d.]+)\)", log, re.M)
+        ]
+        spans.append((stamps[0], stamps[1]))
+    assert max(start for start, _ in spans) < min(end for _, end in spans)  # at once

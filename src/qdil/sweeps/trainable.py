@@ -87,7 +87,7 @@ def run_command(args: list[str], lock: int, threads: int, log: Path, cwd: Path) 
         env["RAY_ADDRESS"] = address
     log.parent.mkdir(parents=True, exist_ok=True)
     with open(log, "ab") as out:
-        out.write(f"$ qdil {' '.join(args)}\n".encode())
+        out.write(f"$ qdil {' '.join(args)}\n# started {_now()}\n".encode())
         if os.environ.get("CUDA_VISIBLE_DEVICES"):  # set by Ray for a trial given GPUs
             out.write(f"# the GPUs Ray gave this trial: {_gpus()}\n".encode())
         out.flush()
@@ -101,9 +101,17 @@ def run_command(args: list[str], lock: int, threads: int, log: Path, cwd: Path) 
             preexec_fn=_die_with_parent if sys.platform == "linux" else None,
             check=False,
         )
+        out.write(f"# ended {_now()} with exit status {done.returncode}\n".encode())
     if done.returncode:
         tail = log.read_text(errors="replace")[-3000:]
         raise TrialError(f"qdil {args[0]} exited with {done.returncode}; its output ends:\n{tail}")
+
+
+def _now() -> str:
+    """Wall-clock time for the trial's log: ISO 8601 and Unix seconds (what tests compare)."""
+    now = time.time()
+    stamp = time.strftime("%Y-%m-%dT%H:%M:%S%z", time.localtime(now))
+    return f"{stamp} (unix {now:.3f})"
 
 
 def _gpus() -> str:
