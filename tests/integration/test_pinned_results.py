@@ -211,7 +211,12 @@ def fit_digest(run_dir: Path) -> str:
     emitter = scheduler.emitters[0]
     with open(run_dir / "metrics.csv", newline="") as file:
         rows = [
-            {k: v for k, v in row.items() if not k.startswith("perf/") or k == "perf/env_steps"}
+            # survival/ came after the pins: figures about the run that change none of its bits
+            {
+                k: v
+                for k, v in row.items()
+                if not k.startswith(("perf/", "survival/")) or k == "perf/env_steps"
+            }
             for row in csv.DictReader(file)
         ]
     return digest(archives, emitter.theta, emitter.coefficient_mean, rows)

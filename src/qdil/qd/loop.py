@@ -38,6 +38,7 @@ from qdil.data import Rollout, TransitionBatch
 from qdil.qd.archives import QD_OFFSETS, qd_metrics
 from qdil.qd.checkpoint import save_checkpoint
 from qdil.qd.search import search_emitters
+from qdil.qd.survival import SurvivalTally
 from qdil.reductions import sum_over
 from qdil.rl.episodes import Evaluation
 from qdil.rl.normalize import RunningMeanStd
@@ -92,6 +93,7 @@ class TrainReward:
         self.run = run
         self.total = 0.0
         self.steps = 0
+        self.survival = SurvivalTally()
 
     def __call__(self, rollout: Rollout) -> torch.Tensor:
         """(T, N) rewards of a training rollout (visits count toward the bonus)."""
@@ -100,6 +102,7 @@ class TrainReward:
         valid = rollout.valid > 0
         self.total += float(sum_over(rewards[valid], 0))  # thread-invariant over 384,000 steps
         self.steps += int(valid.sum())
+        self.survival.add(rollout, rewards)
         return rewards
 
     @property
@@ -307,6 +310,7 @@ def _common_metrics(
         # what RL is handed per step; the bonus wrapper splits it into learned and bonus
         metrics["reward/train_per_step"] = train_reward.per_step
         metrics.setdefault("reward/learned_per_step", train_reward.per_step)
+    metrics |= train_reward.survival.metrics()
     metrics |= {
         "perf/env_steps": float(state.env_steps),
         "perf/sps": steps / seconds,
