@@ -4,8 +4,6 @@ the test's own demonstrations, an OpenGL backend, a one-iteration smoke run."""
 from __future__ import annotations
 
 import os
-import subprocess
-import sys
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -80,7 +78,6 @@ def walker_demos(tmp_path_factory: pytest.TempPathFactory):
     return path
 
 
-SMOKE = Path(__file__).resolve().parents[1] / "recipes" / "smoke" / "walker_true.yaml"
 """PPGA on the true reward at the sizes of a test: a few seconds an iteration."""
 
 
@@ -97,20 +94,10 @@ def gl() -> str:
 
 @pytest.fixture(scope="module")
 def smoke_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A one-iteration run of :data:`SMOKE` with a checkpoint, made by ``qdil fit`` in a
+    """A one-iteration run of the smoke recipe with a checkpoint, made by ``qdil fit`` in a
     process of its own (no plugins, no W&B): its directory."""
     root = tmp_path_factory.mktemp("smoke")
-    # no plugins: the run's folder has no ./plugins, and the variable is left out (a folder
-    # on it that does not exist is an error)
-    env = {k: v for k, v in os.environ.items() if k != "QDIL_PLUGIN_PATH"}
-    env["WANDB_MODE"] = "disabled"
-    quick = ["--qd.iterations", "1", "--name", "tiny"]
-    subprocess.run(
-        [sys.executable, "-m", "qdil.cli", "fit", str(SMOKE), *quick],
-        cwd=root,
-        env=env,
-        check=True,
-        capture_output=True,
-        timeout=900,
-    )
+    from tests.commands import SMOKE, qdil  # qdil imported after the variables above
+
+    qdil("fit", str(SMOKE), "--qd.iterations", "1", "--name", "tiny", cwd=root, check=True)
     return root / "runs" / "tiny"

@@ -18,9 +18,9 @@ from qdil.devices import fabric_settings, run_device
 from qdil.envs.vector import LocomotionVectorEnv
 from qdil.executors.local import LocalExecutor
 from qdil.qd.vppo import VPPO
+from tests.commands import SMOKE
 
 ROOT = Path(__file__).resolve().parents[1]
-SMOKE = ROOT / "recipes" / "smoke" / "walker_true.yaml"
 IL = ROOT / "recipes" / "smoke" / "walker_il.yaml"
 
 

@@ -32,9 +32,9 @@ from qdil.cli import main  # noqa: E402
 from qdil.envs.torch_vector import TorchVectorEnv  # noqa: E402
 from qdil.rl.networks import VectorizedActor  # noqa: E402
 from qdil.rl.normalize import RunningMeanStd  # noqa: E402
+from tests.commands import SMOKE  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
-SMOKE = ROOT / "recipes" / "smoke" / "walker_true.yaml"
 IL = ROOT / "recipes" / "smoke" / "walker_il.yaml"
 ON_GPU = ("--env.backend", "warp", "--env.device", "cuda")
 

@@ -11,9 +11,9 @@ from qdil.cli import main
 from qdil.evaluation.runs import collect_runs
 from qdil.qd.checkpoint import CHECKPOINT, read_checkpoint
 from tests.cli.test_reproducible_runs import archives, metrics, same_archives
+from tests.commands import SMOKE
 
 ROOT = Path(__file__).resolve().parents[2]
-SMOKE = ROOT / "recipes" / "smoke" / "walker_true.yaml"
 LONG = ["--qd.iterations", "50", "--logging.checkpoint_every", "10"]
 
 

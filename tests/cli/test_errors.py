@@ -14,23 +14,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from qdil.cli import main
+from tests.commands import SMOKE, cli
 
 ROOT = Path(__file__).resolve().parents[2]
-SMOKE = ROOT / "recipes" / "smoke" / "walker_true.yaml"
-
-
-def cli(args: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
-    """(exit code, stdout, stderr) of ``qdil ARGS``, as the console script would give them."""
-    try:
-        main(args)
-        code: int | str | None = 0
-    except SystemExit as exit_:
-        code = exit_.code
-    out, err = capsys.readouterr()
-    if isinstance(code, str):  # SystemExit("message"): Python prints it and exits 1
-        return 1, out, err + code
-    return code or 0, out, err
 
 
 HELP = {

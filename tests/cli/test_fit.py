@@ -3,11 +3,8 @@
 from __future__ import annotations
 
 import csv
-import os
 import pickle
 import signal
-import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -15,23 +12,7 @@ import numpy as np
 import pytest
 import torch
 
-ROOT = Path(__file__).resolve().parents[2]
-SMOKE = ROOT / "recipes" / "smoke" / "walker_true.yaml"
-
-
-def qdil(*args: str, cwd: Path, check: bool = True) -> subprocess.CompletedProcess:
-    # no plugin folders: cwd has no ./plugins, and the caller's QDIL_PLUGIN_PATH is left out
-    env = {k: v for k, v in os.environ.items() if k != "QDIL_PLUGIN_PATH"}
-    env["WANDB_MODE"] = "disabled"
-    return subprocess.run(
-        [sys.executable, "-m", "qdil.cli", *args],
-        cwd=cwd,
-        env=env,
-        check=check,
-        capture_output=True,
-        text=True,
-        timeout=600,
-    )
+from tests.commands import SMOKE, qdil, start_qdil
 
 
 def rows(run_dir: Path) -> list[dict[str, str]]:
@@ -45,7 +26,7 @@ def final_archive(run_dir: Path) -> dict[str, np.ndarray]:
 
 
 def test_smoke_fit_writes_config_metrics_and_checkpoint(tmp_path: Path) -> None:
-    qdil("fit", str(SMOKE), "--name", "smoke", cwd=tmp_path)
+    qdil("fit", str(SMOKE), "--name", "smoke", cwd=tmp_path, check=True)
     run_dir = tmp_path / "runs" / "smoke"
     config = (run_dir / "config.yaml").read_text()
     assert "class_path: qdil.rewards.builtin.TrueReward" in config
@@ -55,7 +36,7 @@ def test_smoke_fit_writes_config_metrics_and_checkpoint(tmp_path: Path) -> None:
     assert float(metrics[-1]["qd/num_elites"]) >= 3
     assert float(metrics[-1]["perf/env_steps"]) > float(metrics[0]["perf/env_steps"])
     assert (run_dir / "checkpoints" / "last.pt").exists()
-    again = qdil("fit", str(SMOKE), "--name", "smoke", cwd=tmp_path, check=False)
+    again = qdil("fit", str(SMOKE), "--name", "smoke", cwd=tmp_path)
     assert again.returncode != 0 and "qdil fit --resume" in again.stderr
 
 
@@ -69,7 +50,7 @@ def test_smoke_fit_writes_config_metrics_and_checkpoint(tmp_path: Path) -> None:
     ],
 )
 def test_bad_recipes_name_the_key(tmp_path: Path, override: list[str], message: str) -> None:
-    result = qdil("fit", str(SMOKE), *override, cwd=tmp_path, check=False)
+    result = qdil("fit", str(SMOKE), *override, cwd=tmp_path)
     assert result.returncode != 0
     assert message in result.stderr
 
@@ -77,16 +58,9 @@ def test_bad_recipes_name_the_key(tmp_path: Path, override: list[str], message: 
 def test_killed_run_resumes_to_the_same_archive(tmp_path: Path) -> None:
     """SIGKILL mid-iteration after a checkpoint; the resumed run equals an unbroken one."""
     args = ["--qd.iterations", "4", "--logging.checkpoint_every", "2"]
-    qdil("fit", str(SMOKE), *args, "--name", "unbroken", cwd=tmp_path)
+    qdil("fit", str(SMOKE), *args, "--name", "unbroken", cwd=tmp_path, check=True)
 
-    env = {**os.environ, "WANDB_MODE": "disabled"}
-    process = subprocess.Popen(
-        [sys.executable, "-m", "qdil.cli", "fit", str(SMOKE), *args, "--name", "killed"],
-        cwd=tmp_path,
-        env=env,
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
-    )
+    process = start_qdil("fit", str(SMOKE), *args, "--name", "killed", cwd=tmp_path)
     checkpoint = tmp_path / "runs" / "killed" / "checkpoints" / "last.pt"
     deadline = time.time() + 300
     while not checkpoint.exists() and process.poll() is None and time.time() < deadline:
@@ -96,7 +70,7 @@ def test_killed_run_resumes_to_the_same_archive(tmp_path: Path) -> None:
     assert process.returncode == -signal.SIGKILL, "the run must be killed, not finish"
     assert torch.load(checkpoint, weights_only=False)["iteration"] == 2
 
-    qdil("fit", "--resume", str(tmp_path / "runs" / "killed"), cwd=tmp_path)
+    qdil("fit", "--resume", str(tmp_path / "runs" / "killed"), cwd=tmp_path, check=True)
     unbroken, resumed = tmp_path / "runs" / "unbroken", tmp_path / "runs" / "killed"
     assert [r["iteration"] for r in rows(resumed)] == ["1", "2", "3", "4"]
     for a, b in zip(rows(unbroken), rows(resumed), strict=True):
@@ -109,22 +83,22 @@ def test_killed_run_resumes_to_the_same_archive(tmp_path: Path) -> None:
 
 
 def test_resume_of_a_directory_without_a_run_is_refused(tmp_path: Path) -> None:
-    result = qdil("fit", "--resume", str(tmp_path), cwd=tmp_path, check=False)
+    result = qdil("fit", "--resume", str(tmp_path), cwd=tmp_path)
     assert result.returncode != 0 and "not a qdil run directory" in result.stderr
 
 
 def test_bad_checkpoints_are_reported_with_the_file(tmp_path: Path) -> None:
-    qdil("fit", str(SMOKE), "--name", "ck", "--qd.iterations", "2", cwd=tmp_path)
+    qdil("fit", str(SMOKE), "--name", "ck", "--qd.iterations", "2", cwd=tmp_path, check=True)
     run_dir = tmp_path / "runs" / "ck"
     checkpoint = run_dir / "checkpoints" / "last.pt"
     config = (run_dir / "config.yaml").read_text()
     (run_dir / "config.yaml").write_text(config.replace("task: Walker2d-v5", "task: Hopper-v5"))
-    result = qdil("fit", "--resume", str(run_dir), cwd=tmp_path, check=False)
+    result = qdil("fit", "--resume", str(run_dir), cwd=tmp_path)
     # the checkpoint stores its recipe: the edited key is named before anything is built
     assert "env.task: 'Walker2d-v5' -> 'Hopper-v5'" in result.stderr
     (run_dir / "config.yaml").write_text(config)
     checkpoint.write_bytes(checkpoint.read_bytes()[:1000])
-    result = qdil("fit", "--resume", str(run_dir), cwd=tmp_path, check=False)
+    result = qdil("fit", "--resume", str(run_dir), cwd=tmp_path)
     assert result.returncode != 0
     assert f"{checkpoint} is not a readable qdil checkpoint" in result.stderr
     assert "Traceback" not in result.stderr

@@ -18,9 +18,7 @@ import yaml
 
 from qdil.cli import main
 from qdil.qd.checkpoint import config_differences
-
-ROOT = Path(__file__).resolve().parents[2]
-SMOKE = ROOT / "recipes" / "smoke" / "walker_true.yaml"
+from tests.commands import SMOKE, qdil, start_qdil
 
 
 def iterations(run_dir: Path) -> list[str]:
@@ -43,12 +41,7 @@ def test_a_run_killed_before_its_first_checkpoint_starts_over(
     monkeypatch.delenv("QDIL_PLUGIN_PATH", raising=False)  # only ./plugins, absent here
     args = ["--qd.iterations", "2", "--logging.checkpoint_every", "2", "--name", "early"]
     run_dir = Path("runs") / "early"
-    process = subprocess.Popen(
-        [sys.executable, "-m", "qdil.cli", "fit", str(SMOKE), *args],
-        env={**os.environ, "WANDB_MODE": "disabled"},
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
-    )
+    process = start_qdil("fit", str(SMOKE), *args, cwd=tmp_path)
     metrics = run_dir / "metrics.csv"
     deadline = time.time() + 600  # a loaded machine may take minutes for the first iteration
     # header and one row: iteration 1 is logged, the checkpoint comes after iteration 2
@@ -186,14 +179,7 @@ def test_a_resume_online_without_a_login_stops_before_writing(
     env |= {"HOME": str(tmp_path), "NETRC": str(tmp_path / "no-netrc")}  # never logged in
     env.pop("QDIL_PLUGIN_PATH", None)
     args = ["--resume", str(run_dir), "--qd.iterations", "2", "--logging.wandb", "online"]
-    done = subprocess.run(
-        [sys.executable, "-m", "qdil.cli", "fit", *args],
-        cwd=tmp_path,
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=600,
-    )
+    done = qdil("fit", *args, cwd=tmp_path, env=env)
     assert done.returncode != 0
     assert (
         done.stderr.strip()

@@ -10,37 +10,24 @@ another vendor's CPU is reported as not reproducible on one machine."""
 from __future__ import annotations
 
 import json
-import os
 import pickle
 import shutil
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from tests import commands
 from tests.cli.test_reproducible_runs import archives, metrics, same_archives
+from tests.commands import SMOKE, user_env
 
 pytest.importorskip("ray")
-
-ROOT = Path(__file__).resolve().parents[2]
-SMOKE = ROOT / "recipes" / "smoke" / "walker_true.yaml"
 
 
 def qdil(*args: str, cwd: Path) -> None:
     """``qdil ARGS`` in a process of its own, with the threads a user's run has."""
-    env = {k: v for k, v in os.environ.items() if k not in ("QDIL_PLUGIN_PATH", "QDIL_NUM_THREADS")}
-    env |= {"WANDB_MODE": "disabled", "RAY_DISABLE_USAGE_STATS": "1"}
-    done = subprocess.run(
-        [sys.executable, "-m", "qdil.cli", *args],
-        cwd=cwd,
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=600,
-    )
-    assert done.returncode == 0, done.stderr[-4000:]
+    env = user_env(threads=False, RAY_DISABLE_USAGE_STATS="1")
+    commands.qdil(*args, cwd=cwd, env=env, check=True)
 
 
 @pytest.fixture(scope="module")

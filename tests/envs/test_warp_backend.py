@@ -25,8 +25,8 @@ pytest.importorskip("mujoco_warp", reason="the warp extra is not installed")
 
 from qdil.cli import main
 from qdil.envs.vector import LocomotionVectorEnv
+from tests.commands import SMOKE
 
-SMOKE = Path(__file__).resolve().parents[2] / "recipes" / "smoke" / "walker_true.yaml"
 TASKS = ["Walker2d-v5", "HalfCheetah-v5", "Hopper-v5", "Ant-v5", "Humanoid-v5-newton"]
 NUM = 3
 # (qpos, qvel, reward) tolerances: at worst, and in the median over the steps

@@ -6,12 +6,9 @@ import contextlib
 import csv
 import io
 import json
-import os
 import pickle
 import shutil
 import statistics
-import subprocess
-import sys
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -22,26 +19,14 @@ from scipy.stats import tukey_hsd
 
 from qdil.evaluation.report import write_report
 from qdil.evaluation.runs import collect_runs
+from tests.commands import SMOKE, qdil
 
-ROOT = Path(__file__).resolve().parents[2]
-SMOKE = ROOT / "recipes" / "smoke" / "walker_true.yaml"
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 METHODS = ("AIRL-Bonus", "PPGA-trueReward")  # the pairs the tests compare
 
 
 def qdil_fit(*args: str, cwd: Path) -> None:
-    # no plugin folders: cwd has no ./plugins, and the caller's QDIL_PLUGIN_PATH is left out
-    env = {k: v for k, v in os.environ.items() if k != "QDIL_PLUGIN_PATH"}
-    env["WANDB_MODE"] = "disabled"
-    subprocess.run(
-        [sys.executable, "-m", "qdil.cli", "fit", str(SMOKE), *args],
-        cwd=cwd,
-        env=env,
-        check=True,
-        capture_output=True,
-        text=True,
-        timeout=600,
-    )
+    qdil("fit", str(SMOKE), *args, cwd=cwd, check=True)
 
 
 def copy_run(source: Path, target: Path, **changes: dict) -> Path:

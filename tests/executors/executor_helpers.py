@@ -8,14 +8,11 @@ from typing import Any
 import numpy as np
 import torch
 
-from qdil.envs.vector import LocomotionVectorEnv
 from qdil.executors.sharded import ShardedExecutor
 from qdil.executors.worker import ShardWorker
-from qdil.qd.scoring import Scorer
-from qdil.qd.vppo import VPPO
 from qdil.rl.networks import VectorizedActor
 from qdil.rl.normalize import RunningMeanStd
-from qdil.run import set_up_policies
+from tests.vppo_setup import make_vppo
 
 
 class _PickledHistoryWorker(ShardWorker):
@@ -43,23 +40,6 @@ class InProcessExecutor(ShardedExecutor):
 
     def close(self) -> None:
         self.workers = []
-
-
-def make_vppo(executor: Any, num_envs: int = 12, eval_envs: int = 8) -> tuple[VPPO, Scorer]:
-    """VPPO on Walker2d, 12 training simulations (k+1 = 3 blocks of 4), 20-step episodes,
-    and the scorer of its policies."""
-    algo = VPPO(
-        rollout_length=16,
-        jacobian_iterations=2,
-        walk_iterations=2,
-        num_minibatches=2,
-        update_epochs=2,
-    )
-    kwargs = {"max_episode_steps": 20, "num_threads": 1}
-    train = LocomotionVectorEnv("Walker2d-v5", num_envs, autoreset_mode="SameStep", **kwargs)
-    evaluation = LocomotionVectorEnv("Walker2d-v5", eval_envs, autoreset_mode="Disabled", **kwargs)
-    _, scorer, _ = set_up_policies(train, evaluation, algo, executor=executor)
-    return algo, scorer
 
 
 def run_phases(executor: Any, num_envs: int = 12) -> list[Any]:

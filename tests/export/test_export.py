@@ -20,9 +20,9 @@ from qdil.qd.loop import stats_from_fields
 from qdil.rl.collect import ActionMap
 from qdil.rl.networks import VectorizedActor
 from qdil.rl.sampler import act
+from tests.commands import SMOKE
 
 ROOT = Path(__file__).resolve().parents[2]
-SMOKE = ROOT / "recipes" / "smoke" / "walker_true.yaml"
 
 # What a user's loop looks like: the only imports are numpy, gymnasium and the runtime.
 PLAYER = """

@@ -17,9 +17,9 @@ from run_rows import rows
 
 from qdil.cli import main
 from qdil.qd import EvolutionStrategyEmitter
+from tests.commands import SMOKE
 
 ROOT = Path(__file__).resolve().parents[2]
-SMOKE = ROOT / "recipes" / "smoke" / "walker_true.yaml"
 SEP = [
     "--rl", "null",
     "--qd.emitter", "qdil.qd.EvolutionStrategyEmitter",

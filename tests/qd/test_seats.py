@@ -21,9 +21,9 @@ from qdil.qd.seats import (
     SearchScheduler,
     seat_problem,
 )
+from tests.commands import SMOKE
 
 ROOT = Path(__file__).resolve().parents[2]
-SMOKE = ROOT / "recipes" / "smoke" / "walker_true.yaml"
 
 
 class DelegatingEstimator:

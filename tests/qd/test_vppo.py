@@ -17,24 +17,12 @@ from qdil.rl.networks import VectorizedActor
 from qdil.rl.normalize import RunningMeanStd
 from qdil.rl.ppo import ppo_update
 from qdil.run import set_up_policies
+from tests.vppo_setup import make_vppo
 
 
 @pytest.fixture(scope="module")
 def vppo_scorer() -> tuple[VPPO, Scorer]:
-    algo = VPPO(
-        rollout_length=16,
-        jacobian_iterations=2,
-        walk_iterations=2,
-        num_minibatches=2,
-        update_epochs=2,
-        target_kl=None,
-    )
-    train = LocomotionVectorEnv("Walker2d-v5", 6, max_episode_steps=40, autoreset_mode="SameStep")
-    evaluation = LocomotionVectorEnv(
-        "Walker2d-v5", 4, max_episode_steps=40, autoreset_mode="Disabled"
-    )
-    _, scorer, _ = set_up_policies(train, evaluation, algo)
-    return algo, scorer
+    return make_vppo(num_envs=6, eval_envs=4, max_episode_steps=40, target_kl=None)
 
 
 @pytest.fixture(scope="module")

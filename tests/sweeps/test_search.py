@@ -8,10 +8,7 @@ from __future__ import annotations
 import json
 import os
 import signal
-import subprocess
-import sys
 import time
-from pathlib import Path
 
 import pytest
 
@@ -24,9 +21,8 @@ import ray
 from qdil.cli import main
 from qdil.sweeps.search import Domain, RescoredOptunaSearch, Search, parse_domain
 from tests.cli.test_reproducible_runs import archives, metrics, same_archives
+from tests.commands import SMOKE, qdil, start_qdil
 
-ROOT = Path(__file__).resolve().parents[2]
-SMOKE = ROOT / "recipes" / "smoke" / "walker_true.yaml"
 SPACE = ["--space", "rl.init_args.learning_rate=log:1e-4:1e-2"]
 
 
@@ -107,12 +103,10 @@ def test_a_killed_search_goes_on_and_each_trial_equals_its_plain_fit(tmp_path) -
     """Killed (SIGKILL to its process group) once its first trial is re-scored, run again:
     it ends ranked by re-scored coverage, with no trial run twice, each as ``qdil fit``."""
     root = tmp_path / "runs"
-    command = [sys.executable, "-m", "qdil.cli", "sweep", str(SMOKE), "--seeds", "0"]
+    command = ["sweep", str(SMOKE), "--seeds", "0"]
     command += ["--root", str(root), "--search", "optuna", *SPACE, "--samples", "2"]
     command += ["--grace", "0", "--episodes", "1", "--concurrent", "1"]
-    env = {k: v for k, v in os.environ.items() if k != "QDIL_PLUGIN_PATH"}
-    search = subprocess.Popen(command, env=env, start_new_session=True, cwd=tmp_path,
-                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)  # fmt: skip
+    search = start_qdil(*command, cwd=tmp_path)
     deadline = time.monotonic() + 300
     while time.monotonic() < deadline and not list(root.glob("*/eval.json")):
         time.sleep(0.5)
@@ -120,8 +114,7 @@ def test_a_killed_search_goes_on_and_each_trial_equals_its_plain_fit(tmp_path) -
     search.wait()
     (first,) = root.glob("*/eval.json")  # one trial, one at a time, re-scored before the kill
     when = first.stat().st_mtime_ns
-    done = subprocess.run(command, env=env, cwd=tmp_path, capture_output=True, text=True)
-    assert done.returncode == 0, done.stderr[-3000:]
+    done = qdil(*command, cwd=tmp_path, check=True)
     assert first.stat().st_mtime_ns == when  # the finished trial was not run again
     ranked = _ranking(done.stderr)
     assert len(ranked) == 2 and ranked[0][0] >= ranked[1][0]
@@ -133,11 +126,17 @@ def test_a_killed_search_goes_on_and_each_trial_equals_its_plain_fit(tmp_path) -
     rows = table.read_text().splitlines()
     assert rows[0] == "run,coverage,rl.init_args.learning_rate" and len(rows) == 3
     _, name, options = ranked[-1]
-    plain = subprocess.run(
-        [sys.executable, "-m", "qdil.cli", "fit", str(SMOKE), "--seed", "0", *options,
-         "--logging.root", "plain"], env=env, cwd=tmp_path, capture_output=True, text=True,
-    )  # fmt: skip
-    assert plain.returncode == 0, plain.stderr[-3000:]
+    qdil(
+        "fit",
+        str(SMOKE),
+        "--seed",
+        "0",
+        *options,
+        "--logging.root",
+        "plain",
+        cwd=tmp_path,
+        check=True,
+    )
     trial, alone = root / name, tmp_path / "plain" / "walker_true-seed0"
     assert metrics(trial) == metrics(alone)
     assert same_archives(archives(trial), archives(alone))

@@ -6,8 +6,6 @@ from __future__ import annotations
 import os
 import re
 import signal
-import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -19,9 +17,8 @@ import ray
 
 from qdil.cli import main
 from tests.cli.test_reproducible_runs import archives, metrics, same_archives
+from tests.commands import ROOT, SMOKE, qdil, start_qdil
 
-ROOT = Path(__file__).resolve().parents[2]
-SMOKE = ROOT / "recipes" / "smoke" / "walker_true.yaml"
 IL = ROOT / "recipes" / "smoke" / "walker_il.yaml"
 SEEDS = ("0", "1", "2")
 
@@ -100,11 +97,9 @@ def test_a_killed_sweep_run_again_ends_as_three_plain_fits(plain, tmp_path) -> N
     command again finishes every trial as ``qdil fit`` would have, re-scores them and reports;
     once more, it finds every trial finished and writes nothing."""
     root, report = tmp_path / "runs", tmp_path / "report"
-    command = [sys.executable, "-m", "qdil.cli", "sweep", str(SMOKE), "--seeds", *SEEDS]
+    command = ["sweep", str(SMOKE), "--seeds", *SEEDS]
     command += ["--root", str(root), "--episodes", "1", "--report", str(report)]
-    env = {k: v for k, v in os.environ.items() if k != "QDIL_PLUGIN_PATH"}
-    sweep = subprocess.Popen(command, env=env, start_new_session=True, cwd=tmp_path,
-                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)  # fmt: skip
+    sweep = start_qdil(*command, cwd=tmp_path)
     deadline = time.monotonic() + 300
     while time.monotonic() < deadline and not list(root.glob("*/checkpoints/last.pt")):
         time.sleep(0.5)
@@ -116,8 +111,7 @@ def test_a_killed_sweep_run_again_ends_as_three_plain_fits(plain, tmp_path) -> N
     ]
     assert min(logged, default=0) < 3 or len(logged) < 3  # killed before the sweep's end
     assert not report.exists()
-    done = subprocess.run(command, env=env, cwd=tmp_path, capture_output=True, text=True)
-    assert done.returncode == 0, done.stderr[-3000:]
+    qdil(*command, cwd=tmp_path, check=True)
     for seed in SEEDS:
         run = root / f"walker_true-seed{seed}"
         assert same_runs(run, plain / f"walker_true-seed{seed}")
@@ -125,16 +119,12 @@ def test_a_killed_sweep_run_again_ends_as_three_plain_fits(plain, tmp_path) -> N
         assert "wandb_group: sweep-" in (run / "config.yaml").read_text()  # W&B groups them
     assert (report / "report.md").is_file()
     before = {p: p.stat().st_mtime_ns for p in root.glob("walker_*/**/*")}
-    again = subprocess.run(command, env=env, cwd=tmp_path, capture_output=True, text=True)
-    assert again.returncode == 0, again.stderr[-3000:]
+    qdil(*command, cwd=tmp_path, check=True)
     assert before == {p: p.stat().st_mtime_ns for p in root.glob("walker_*/**/*")}
 
 
 def test_sweep_help_lists_its_options() -> None:
-    done = subprocess.run(
-        [sys.executable, "-m", "qdil.cli", "sweep", "--help"], capture_output=True, text=True
-    )
-    assert done.returncode == 0
+    done = qdil("sweep", "--help", cwd=ROOT, check=True)
     for option in ("--seeds", "--cpus-per-trial", "--gpus-per-trial", "--address", "--report"):
         assert option in done.stdout
 

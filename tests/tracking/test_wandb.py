@@ -5,12 +5,9 @@ from __future__ import annotations
 
 import json
 import os
-import subprocess
-import sys
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[2]
-SMOKE = ROOT / "recipes" / "smoke" / "walker_true.yaml"
+from tests.commands import SMOKE, qdil
 
 
 def records(run_file: Path) -> list[bytes]:
@@ -64,17 +61,6 @@ def run_record(run_file: Path):
         if record.WhichOneof("record_type") == "run":
             return record.run
     raise AssertionError(f"no run record in {run_file}")
-
-
-def qdil(*args: str, cwd: Path, env: dict[str, str]) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, "-m", "qdil.cli", *args],
-        cwd=cwd,
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=900,
-    )
 
 
 def files(folder: Path) -> dict[str, bytes]:
