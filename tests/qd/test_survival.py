@@ -6,6 +6,7 @@ import csv
 import math
 from pathlib import Path
 
+import numpy as np
 import torch
 
 from qdil.data import Rollout
@@ -33,12 +34,12 @@ def test_the_steps_within_the_window_of_a_termination() -> None:
     assert not everything[:, 1].any()
 
 
-def test_the_tally_averages_rewards_before_falls_and_elsewhere() -> None:
-    rewards = torch.arange(18, dtype=torch.float32).reshape(6, 3)
+def _rollout() -> Rollout:
+    """The simulations above; the first one's last step is evaluation padding."""
     valid = torch.ones(6, 3)
     valid[5, 0] = 0.0  # padding after an evaluation episode: counted nowhere
     zeros = torch.zeros(6, 3)
-    rollout = Rollout(
+    return Rollout(
         obs=torch.zeros(6, 3, 1),
         actions=torch.zeros(6, 3, 1),
         contacts=torch.zeros(6, 3, 2),
@@ -51,6 +52,12 @@ def test_the_tally_averages_rewards_before_falls_and_elsewhere() -> None:
         valid=valid,
         starts=zeros,
     )
+
+
+def test_the_tally_averages_rewards_before_falls_and_elsewhere() -> None:
+    rewards = torch.arange(18, dtype=torch.float32).reshape(6, 3)
+    rollout = _rollout()
+    valid = rollout.valid
     tally = SurvivalTally(window=2)
     tally.add(rollout, rewards)
     tally.add(rollout, rewards)  # a second rollout of the iteration adds to the sums
@@ -69,6 +76,19 @@ def test_a_tally_of_nothing_says_nan() -> None:
 def test_every_run_logs_the_survival_figures(smoke_run: Path) -> None:
     with open(smoke_run / "metrics.csv", newline="") as file:
         (row,) = csv.DictReader(file)
-    alive = float(row["survival/reward_alive"])
-    assert math.isfinite(alive)
-    assert float(row["survival/falls_per_1k_steps"]) >= 0.0
+    for prefix in ("", "walk_"):  # the learned reward, and what the walk optimises
+        assert math.isfinite(float(row[f"survival/{prefix}reward_alive"]))
+        assert float(row[f"survival/{prefix}falls_per_1k_steps"]) >= 0.0
+
+
+def test_the_walk_figures_weigh_the_reward_and_the_contacts_by_the_coefficients() -> None:
+    from qdil.qd.loop import _walk_survival
+
+    rollout = _rollout()
+    rollout.next_contacts[..., 0] = 1.0  # the first foot down throughout
+    learned = torch.arange(18, dtype=torch.float32).reshape(6, 3)
+    figures = _walk_survival([rollout, rollout], [learned, learned], np.array([2.0, -1.0, 5.0]))
+    tally = SurvivalTally(prefix="walk_")
+    tally.add(rollout, 2.0 * learned - 1.0)
+    assert figures == tally.metrics()
+    assert _walk_survival([], [], np.ones(3)) == {}

@@ -94,6 +94,7 @@ class TrainReward:
         self.total = 0.0
         self.steps = 0
         self.survival = SurvivalTally()
+        self.returned: list[torch.Tensor] = []  # this phase's rewards, in call order
 
     def __call__(self, rollout: Rollout) -> torch.Tensor:
         """(T, N) rewards of a training rollout (visits count toward the bonus)."""
@@ -103,6 +104,7 @@ class TrainReward:
         self.total += float(sum_over(rewards[valid], 0))  # thread-invariant over 384,000 steps
         self.steps += int(valid.sum())
         self.survival.add(rollout, rewards)
+        self.returned.append(rewards)
         return rewards
 
     @property
@@ -182,10 +184,12 @@ def qd_iteration(run: Run) -> dict[str, float]:
 
     # ---- 3. walk θ_μ along the coefficient mean
     tic_walk = time.perf_counter()
+    coefficients = np.array(emitter.coefficient_mean)  # what the walk is handed
+    train_reward.returned.clear()
     walk = estimator.walk(
         emitter.theta,
         stats_from_fields(emitter.theta_fields),
-        emitter.coefficient_mean,
+        coefficients,
         train_reward,
         state.next_seed(),
     )
@@ -210,6 +214,7 @@ def qd_iteration(run: Run) -> dict[str, float]:
     # ---- 5. metrics
     steps = jacobian_phase.env_steps + walk.env_steps + mean_eval.env_steps + evaluation.env_steps
     metrics = _common_metrics(run, steps, tic, reward_metrics, train_reward)
+    metrics |= _walk_survival(walk.rollouts, train_reward.returned, coefficients)
     metrics |= {f"rl/jacobian_{k}": v for k, v in jacobian_phase.diagnostics.items()}
     metrics |= {f"rl/walk_{k}": v for k, v in walk.diagnostics.items()}
     metrics |= {
@@ -274,6 +279,23 @@ def gradient_free_iteration(run: Run) -> dict[str, float]:
         "emitter/restarts": float(sum(getattr(e, "restarts", 0) for e in emitters)),
     }
     return metrics
+
+
+def _walk_survival(
+    rollouts: list[Rollout], rewards: list[torch.Tensor], coefficients: np.ndarray
+) -> dict[str, float]:
+    """The survival figures of what the walk optimises, c_0·r̂ + Σ_j c_j·δ_j.
+
+    VPPO's walk calls the reward once per rollout; an estimator whose walk plays no
+    rollouts (ES gradients) gets none.
+    """
+    if not rollouts or len(rollouts) != len(rewards):
+        return {}
+    tally = SurvivalTally(prefix="walk_")
+    for rollout, learned in zip(rollouts, rewards, strict=True):
+        c = torch.as_tensor(coefficients, dtype=learned.dtype, device=learned.device)
+        tally.add(rollout, c[0] * learned + (rollout.next_contacts * c[1:]).sum(-1))
+    return tally.metrics()
 
 
 def _update_reward(run: Run, expert: Any, policy: TransitionBatch) -> dict[str, float]:

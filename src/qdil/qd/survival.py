@@ -43,10 +43,12 @@ class SurvivalTally:
 
     Args:
         window: steps before a termination that count as before the fall.
+        prefix: prepended to the metrics' names after ``survival/``.
     """
 
-    def __init__(self, window: int = WINDOW) -> None:
+    def __init__(self, window: int = WINDOW, prefix: str = "") -> None:
         self.window = window
+        self.prefix = prefix
         # reward before falls, steps before falls, reward elsewhere, steps elsewhere, falls
         self.sums = torch.zeros(5, dtype=torch.float64)
 
@@ -70,13 +72,15 @@ class SurvivalTally:
         """The iteration's figures so far.
 
         Returns:
-            ``survival/reward_before_fall`` and ``survival/reward_alive`` (mean reward per
-            step; NaN without such steps) and ``survival/falls_per_1k_steps``.
+            ``survival/{prefix}reward_before_fall`` and ``survival/{prefix}reward_alive``
+            (mean reward per step; NaN without such steps) and
+            ``survival/{prefix}falls_per_1k_steps``.
         """
         near, near_steps, far, far_steps, falls = self.sums.tolist()
         steps = near_steps + far_steps
-        return {
-            "survival/reward_before_fall": near / near_steps if near_steps else float("nan"),
-            "survival/reward_alive": far / far_steps if far_steps else float("nan"),
-            "survival/falls_per_1k_steps": 1000.0 * falls / steps if steps else float("nan"),
+        figures = {
+            "reward_before_fall": near / near_steps if near_steps else float("nan"),
+            "reward_alive": far / far_steps if far_steps else float("nan"),
+            "falls_per_1k_steps": 1000.0 * falls / steps if steps else float("nan"),
         }
+        return {f"survival/{self.prefix}{name}": value for name, value in figures.items()}
