@@ -6,8 +6,9 @@ import math
 
 import numpy as np
 import pytest
+from scipy import stats
 
-from qdil.evaluation.ratios import ratio_of_means, seeds_to_resolve
+from qdil.evaluation.ratios import BOOTSTRAP_SEED, RESAMPLES, ratio_of_means, seeds_to_resolve
 
 
 def spread(mean: float, sd: float) -> np.ndarray:
@@ -36,6 +37,27 @@ def test_the_ratio_is_of_means_and_its_interval_holds_it() -> None:
     assert ratio_of_means(wqdil, gail) == ratio  # the resampling is seeded
     wider = ratio_of_means(wqdil, [0.6e6, 1.02e6, 1.56e6])
     assert wider.high - wider.low > ratio.high - ratio.low
+
+
+def test_intervals_repeat_from_the_stated_random_state() -> None:
+    # eight spread values a side, so nearly every resample's ratio is distinct and an
+    # unseeded bootstrap would move the interval's ends from one call to the next
+    values = np.random.default_rng(7)
+    wqdil, gail = values.normal(1.1e6, 1e5, 8), values.normal(1.0e6, 1.5e5, 8)
+    first, second = ratio_of_means(wqdil, gail), ratio_of_means(wqdil, gail)
+    assert (first.low, first.high) == (second.low, second.high)
+    # the state is the one the report states: scipy's bootstrap from BOOTSTRAP_SEED agrees
+    direct = stats.bootstrap(
+        (wqdil, gail),
+        lambda x, y, axis: np.mean(x, axis=axis) / np.mean(y, axis=axis),
+        n_resamples=RESAMPLES,
+        method="percentile",
+        random_state=np.random.default_rng(BOOTSTRAP_SEED),
+    ).confidence_interval
+    assert (first.low, first.high) == (direct.low, direct.high)
+    # and the state matters: another one gives other ends
+    other = ratio_of_means(wqdil, gail, seed=BOOTSTRAP_SEED + 1)
+    assert (other.low, other.high) != (first.low, first.high)
 
 
 def test_one_seed_gives_a_ratio_without_an_interval() -> None:

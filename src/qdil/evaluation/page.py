@@ -17,7 +17,7 @@ from qdil.evaluation import explorer
 from qdil.evaluation.figures import HeatmapGrid, colour_range
 from qdil.evaluation.gallery import Gallery, VideoSettings
 from qdil.evaluation.profiles import profile_table
-from qdil.evaluation.ratios import RESAMPLES
+from qdil.evaluation.ratios import BOOTSTRAP_SEED, RESAMPLES
 from qdil.evaluation.runs import (
     Groups,
     RunResult,
@@ -159,10 +159,10 @@ def build_document(
                 "Ratio of the methods' mean QD-Scores over seeds (raw: the paper's sum of "
                 "returns; offset: PPGA's, which stays positive), with a 95 % percentile "
                 "bootstrap interval that resamples each method's seeds (crude with 3 seeds, "
-                f"none with 1; {RESAMPLES:,} resamples, random state 0, so that the report "
-                "made again gives the same digits). Where the reference's mean QD-Score may "
-                "be 0 (its own interval holds 0) the ratio has no bounded interval and says "
-                "so. Seeds to resolve: seeds per method a two-sided t-test (α = 0.05, "
+                f"none with 1; {RESAMPLES:,} resamples, random state {BOOTSTRAP_SEED}, so that "
+                "the report made again gives the same digits). Where the reference's mean "
+                "QD-Score may be 0 (its own interval holds 0) the ratio has no bounded interval "
+                "and says so. Seeds to resolve: seeds per method a two-sided t-test (α = 0.05, "
                 "power 0.8) would need to find the observed gap, from the pooled spread."
             )
         ]
