@@ -39,6 +39,7 @@ from qdil.qd.archives import QD_OFFSETS, qd_metrics
 from qdil.qd.checkpoint import save_checkpoint
 from qdil.qd.search import search_emitters
 from qdil.qd.survival import SurvivalTally
+from qdil.qd.vppo import walk_rewards
 from qdil.reductions import sum_over
 from qdil.rl.episodes import Evaluation
 from qdil.rl.normalize import RunningMeanStd
@@ -294,7 +295,7 @@ def _walk_survival(
     tally = SurvivalTally(prefix="walk_")
     for rollout, learned in zip(rollouts, rewards, strict=True):
         c = torch.as_tensor(coefficients, dtype=learned.dtype, device=learned.device)
-        tally.add(rollout, c[0] * learned + (rollout.next_contacts * c[1:]).sum(-1))
+        tally.add(rollout, walk_rewards(c, learned, rollout.next_contacts))
     return tally.metrics()
 
 

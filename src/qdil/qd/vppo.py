@@ -266,7 +266,7 @@ class VPPO:
             rollout, pdata = self.executor.collect(
                 actor, stats, self.rollout_length, self.generator, update_stats=True
             )
-            rewards = c[0] * reward_fn(rollout) + (rollout.next_contacts * c[1:]).sum(-1)
+            rewards = walk_rewards(c, reward_fn(rollout), rollout.next_contacts)
             diagnostics.append(
                 ppo_update(
                     self.ppo, self.generator, actor, actor_opt, self.walk_critic,
@@ -286,6 +286,22 @@ class VPPO:
         """Restore :meth:`state_dict` (after :meth:`setup`)."""
         for name in _PERSISTENT:
             getattr(self, name).load_state_dict(state[name])
+
+
+def walk_rewards(
+    coefficients: torch.Tensor, learned: torch.Tensor, next_contacts: torch.Tensor
+) -> torch.Tensor:
+    """The walk's per-step reward c_0·r̂ + Σ_j c_j·δ_j.
+
+    Args:
+        coefficients: (k+1,) gradient coefficients c, on the rewards' device and dtype.
+        learned: (T, N) rewards r̂ of the objective.
+        next_contacts: (T, N, k) contact flags δ(s_{t+1}) after each step.
+
+    Returns:
+        (T, N) rewards.
+    """
+    return coefficients[0] * learned + (next_contacts * coefficients[1:]).sum(-1)
 
 
 def _mean(diagnostics: list[dict[str, float]]) -> dict[str, float]:
