@@ -11,6 +11,7 @@ Shapes use T for time steps, N for parallel environments, B for a flat batch, an
 from __future__ import annotations
 
 from dataclasses import dataclass, fields
+from typing import Any
 
 import torch
 
@@ -27,6 +28,11 @@ class TransitionBatch:
         next_contacts: (B, k) flags δ(s_{t+1}).
         dones: (B,) 1.0 where the episode ended at this step (terminated or truncated).
         log_probs: (B,) log π(a_t | s_t) of the acting policy, or NaN where unknown (demos).
+        terminated: (B,) 1.0 where the episode ended by termination (not the time limit);
+            zeros when not given.
+        absorbing: (B,) 1.0 for a transition of the absorbing state that follows a
+            termination (:meth:`with_absorbing`); its other fields are zeros. Zeros when
+            not given.
     """
 
     obs: torch.Tensor
@@ -36,6 +42,13 @@ class TransitionBatch:
     next_contacts: torch.Tensor
     dones: torch.Tensor
     log_probs: torch.Tensor
+    terminated: Any = None
+    absorbing: Any = None
+
+    def __post_init__(self) -> None:
+        for name in ("terminated", "absorbing"):
+            if getattr(self, name) is None:  # frozen: set once, here
+                object.__setattr__(self, name, torch.zeros_like(self.dones))
 
     def __len__(self) -> int:
         return self.obs.shape[0]
@@ -58,6 +71,38 @@ class TransitionBatch:
         """Concatenate batches along B."""
         return TransitionBatch(
             **{f.name: torch.cat([getattr(b, f.name) for b in batches]) for f in fields(batches[0])}
+        )
+
+    def with_absorbing(self) -> TransitionBatch:
+        """The batch followed by one absorbing transition per terminated transition.
+
+        As in DAC (Kostrikov et al., ICLR 2019), an episode that terminates enters an
+        absorbing state it never leaves, so a reward model can learn what that state is
+        worth instead of the implicit zero of a return that stops. Here the absorbing state
+        is entered from a particular terminal transition and keeps its inputs: each added
+        transition is a copy of a terminated one with ``absorbing`` = 1 (and ``dones`` and
+        ``terminated`` 0). The batch itself when nothing terminated.
+        """
+        ended = self.terminated > 0
+        if not bool(ended.any()):
+            return self
+        copies = self[ended]
+        count = len(copies)
+        absorbing = TransitionBatch(
+            **{f.name: getattr(copies, f.name) for f in fields(self)}
+            | {
+                "dones": copies.dones.new_zeros(count),
+                "terminated": copies.terminated.new_zeros(count),
+                "absorbing": copies.absorbing.new_ones(count),
+            }
+        )
+        return TransitionBatch.cat([self, absorbing])
+
+    def absorbing_copies(self) -> TransitionBatch:
+        """Every transition marked as the absorbing state entered from it."""
+        return TransitionBatch(
+            **{f.name: getattr(self, f.name) for f in fields(self)}
+            | {"absorbing": torch.ones_like(self.dones)}
         )
 
 
@@ -110,7 +155,10 @@ class Rollout:
 
     def flat(self) -> TransitionBatch:
         """All T·N transitions as a flat batch in time-major order (padding included)."""
-        names = ("obs", "actions", "contacts", "next_obs", "next_contacts", "dones", "log_probs")
+        names = (
+            "obs", "actions", "contacts", "next_obs", "next_contacts", "dones", "log_probs",
+            "terminated",
+        )  # fmt: skip
         return TransitionBatch(
             **{
                 name: getattr(self, name).reshape(-1, *getattr(self, name).shape[2:])

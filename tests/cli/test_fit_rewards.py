@@ -155,3 +155,28 @@ def test_a_missing_demo_file_says_how_to_make_one_and_leaves_no_run(
     with pytest.raises(SystemExit, match=r"humanoid\.npz: no such file .*qdil demos RUN_DIR"):
         main(["fit", str(RECIPE), "--demos.path", "humanoid.npz", "--name", "z"])
     assert not (tmp_path / "runs" / "z").exists()
+
+
+@pytest.mark.parametrize(
+    ("reward", "options"),
+    [
+        ("gail", ["--reward.reward_type", "logit"]),
+        ("mcwae_wgail", ["--bonus.enabled", "true", "--reward.reward_type", "standardized_logit"]),
+    ],
+)
+def test_fit_with_absorbing_states_logs_what_a_fall_is_worth(
+    reward: str, options: list[str], walker_demos: Path, tmp_path: Path, monkeypatch
+) -> None:
+    monkeypatch.chdir(tmp_path)
+    main(
+        [
+            "fit", str(RECIPE), "--reward", reward, *options, "--reward.absorbing", "true",
+            "--demos.path", str(walker_demos), "--name", reward, "--qd.iterations", "2",
+        ]
+    )  # fmt: skip
+    with open(tmp_path / "runs" / reward / "metrics.csv", newline="") as file:
+        rows = list(csv.DictReader(file))
+    assert [r["iteration"] for r in rows] == ["1", "2"]
+    for row in rows:  # the smoke walker falls within its 50-step episodes
+        assert float(row["survival/falls_per_1k_steps"]) > 0
+        assert math.isfinite(float(row["reward/absorbing"]))

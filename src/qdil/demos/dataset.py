@@ -66,6 +66,12 @@ class DemoSet:
         sums = np.add.reduceat(self.next_contacts, self.episode_starts, axis=0)
         return sums / self.lengths[:, None]
 
+    def terminated_steps(self) -> np.ndarray:
+        """(T,) 1.0 at the last step of each episode that ended by termination."""
+        out = np.zeros(len(self.obs), dtype=np.float32)
+        out[self.episode_ends[np.asarray(self.terminated, dtype=bool)] - 1] = 1.0
+        return out
+
     def dones(self) -> np.ndarray:
         """(T,) 1.0 at each episode's last step."""
         out = np.zeros(len(self.obs), dtype=np.float32)
@@ -86,4 +92,5 @@ class DemoSet:
             next_contacts=tensor(self.next_contacts),
             dones=tensor(self.dones()),
             log_probs=torch.full((len(self.obs),), float("nan")),
+            terminated=tensor(self.terminated_steps()),
         )

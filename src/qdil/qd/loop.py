@@ -35,6 +35,7 @@ import torch
 
 from qdil.config import finished
 from qdil.data import Rollout, TransitionBatch
+from qdil.qd.absorbing import AbsorbingTail
 from qdil.qd.archives import QD_OFFSETS, qd_metrics
 from qdil.qd.checkpoint import save_checkpoint
 from qdil.qd.search import search_emitters
@@ -88,10 +89,13 @@ class TrainReward:
 
     Args:
         run: the run whose reward model scores the rollouts.
+        tail: what an absorbing state adds where episodes terminate (``None``: nothing);
+            the tally, the mean and ``returned`` leave it out.
     """
 
-    def __init__(self, run: Run) -> None:
+    def __init__(self, run: Run, tail: AbsorbingTail | None = None) -> None:
         self.run = run
+        self.tail = tail
         self.total = 0.0
         self.steps = 0
         self.survival = SurvivalTally()
@@ -106,7 +110,7 @@ class TrainReward:
         self.steps += int(valid.sum())
         self.survival.add(rollout, rewards)
         self.returned.append(rewards)
-        return rewards
+        return rewards if self.tail is None else rewards + self.tail(rollout)
 
     @property
     def per_step(self) -> float:
@@ -122,10 +126,21 @@ def reward_functions(run: Run) -> tuple[TrainReward, Any]:
         reward.check_finite(rewards, "rewards", run.state.iteration)
         return rewards
 
-    train_reward = TrainReward(run)
+    train_tail = eval_tail = None
+    if reward.absorbing:
+        horizon, iteration = run.eval_env.max_episode_steps, run.state.iteration
+        if horizon is None:
+            raise ValueError("absorbing states need env.max_episode_steps (the time limit)")
+        eval_tail = AbsorbingTail(reward, horizon, None, iteration)
+        # an estimator that discounts per-step rewards (VPPO's GAE) declares its gamma;
+        # one that scores whole episodes (ES gradients) gets the episodes' tail
+        gamma = getattr(run.estimator, "gamma", None)
+        train_tail = AbsorbingTail(reward, horizon, gamma, iteration)
+    train_reward = TrainReward(run, train_tail)
 
     def eval_reward(rollout: Rollout) -> torch.Tensor:
-        return checked(reward.predict_reward(rollout))
+        rewards = checked(reward.predict_reward(rollout))
+        return rewards if eval_tail is None else rewards + eval_tail(rollout)
 
     uses_true = run.qd.fitness == "true" or reward.is_true_reward
     return train_reward, (None if uses_true else eval_reward)
@@ -334,6 +349,8 @@ def _common_metrics(
         metrics["reward/train_per_step"] = train_reward.per_step
         metrics.setdefault("reward/learned_per_step", train_reward.per_step)
     metrics |= train_reward.survival.metrics()
+    if train_reward.tail is not None:  # r_a where training episodes terminated
+        metrics["reward/absorbing"] = train_reward.tail.mean
     metrics |= {
         "perf/env_steps": float(state.env_steps),
         "perf/sps": steps / seconds,

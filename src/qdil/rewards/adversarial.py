@@ -6,7 +6,8 @@ data, decision D4), the 0/1 contact flags as they are. One update is ``epochs`` 
 the expert transitions in shuffled minibatches of ``batch_size``, each paired with as many
 policy transitions drawn from the iteration's rollouts ("Discriminator Num Epochs 1" in
 the paper's table). Every such model carries a gradient penalty (weight 10 by default), as
-the paper applies one to all online-trained reward models.
+the paper applies one to all online-trained reward models. With ``absorbing`` the model also
+learns what the absorbing state after a termination is worth (docs/concepts/absorbing.md).
 """
 
 from __future__ import annotations
@@ -40,6 +41,10 @@ class AdversarialReward(RewardModel):
         batch_size: expert (and policy) transitions per gradient step.
         epochs: passes over the expert transitions per QD iteration (the paper: 1).
         gp_weight: weight of the gradient penalty (0 disables it).
+        absorbing: learn a reward for the absorbing state after a termination (DAC): x
+            gains a flag, 1 on absorbing transitions (copies of terminated ones), and every
+            update adds one per terminated transition on either side. The loop then adds
+            that state's worth where episodes terminate.
     """
 
     def __init__(
@@ -53,6 +58,7 @@ class AdversarialReward(RewardModel):
         batch_size: int = 200,
         epochs: int = 1,
         gp_weight: float = 10.0,
+        absorbing: bool = False,
     ) -> None:
         super().__init__(obs_dim, action_dim, num_measures)
         if batch_size < 1 or epochs < 1:
@@ -65,18 +71,33 @@ class AdversarialReward(RewardModel):
         self.batch_size = batch_size
         self.epochs = epochs
         self.gp_weight = gp_weight
+        self.absorbing = absorbing
 
     @property
     def input_dim(self) -> int:
         """Size of x."""
-        return self.obs_dim + self.action_dim + (self.num_measures if self.use_measures else 0)
+        measures = self.num_measures if self.use_measures else 0
+        return self.obs_dim + self.action_dim + measures + int(self.absorbing)
 
     def features(self, batch: TransitionBatch) -> torch.Tensor:
-        """(B, input_dim) x = (s, a[, δ(s)]), standardised where it is continuous."""
+        """(B, input_dim) x = (s, a[, δ(s)][, absorbing]), standardised where continuous."""
         parts = [self.normalize_obs(batch.obs), self.normalize_actions(batch.actions)]
         if self.use_measures:
             parts.append(batch.contacts)
+        if self.absorbing:
+            parts.append(batch.absorbing[:, None].to(parts[0].dtype))
         return torch.cat(parts, dim=1)
+
+    @override
+    @torch.no_grad()
+    def absorbing_reward(self, batch: TransitionBatch) -> torch.Tensor:
+        if not self.absorbing:
+            return super().absorbing_reward(batch)
+        was_training = self.training
+        self.eval()
+        rewards = self.reward(batch.absorbing_copies())
+        self.train(was_training)
+        return rewards
 
     @override
     def configure_optimizers(self) -> Optimizer:
@@ -148,6 +169,8 @@ class AdversarialReward(RewardModel):
         """Pairs of (expert, policy) minibatches: ``epochs`` shuffled passes over the expert."""
         if len(expert) == 0 or len(policy) == 0:
             raise ValueError(f"{type(self).__name__}.update needs expert and policy transitions")
+        if self.absorbing:
+            expert, policy = expert.with_absorbing(), policy.with_absorbing()
         size = min(self.batch_size, len(expert))
         for _ in range(self.epochs):
             order = torch.randperm(len(expert))

@@ -106,6 +106,9 @@ class RewardModel(L.LightningModule):
         prefers_expert: the reward is higher on expert-like transitions (True for
             imitation rewards; False for curiosity rewards such as GIRIL's; None when it
             does not compare, as the true reward). The contract tests check it.
+        absorbing: the model learns the reward of the absorbing state after a termination
+            (:meth:`absorbing_reward`); the loop then adds that state's worth where an
+            episode terminates. An option of the adversarial models (default off).
     """
 
     name: ClassVar[str] = ""
@@ -117,6 +120,7 @@ class RewardModel(L.LightningModule):
     needs_log_probs: ClassVar[bool] = False
     is_true_reward: ClassVar[bool] = False
     prefers_expert: ClassVar[bool | None] = True
+    absorbing: bool = False
 
     def __init__(self, obs_dim: int, action_dim: int, num_measures: int) -> None:
         super().__init__()
@@ -236,6 +240,18 @@ class RewardModel(L.LightningModule):
         raise NonFiniteRewardError(
             f"reward model {model_label(type(self))}: non-finite {what} at QD iteration "
             f"{iteration} ({count}); {advice}"
+        )
+
+    def absorbing_reward(self, batch: TransitionBatch) -> torch.Tensor:
+        """(B,) per-step rewards of the absorbing state entered from each transition.
+
+        Only for a model with ``absorbing`` on; the loop calls it on the terminated
+        transitions of each rollout and adds that state's worth there
+        (docs/concepts/absorbing.md).
+        """
+        raise NotImplementedError(
+            f"reward model {model_label(type(self))} does not learn an absorbing state's "
+            "reward; the adversarial models do (reward.init_args.absorbing: true)"
         )
 
     def extra_state(self) -> dict[str, Any]:

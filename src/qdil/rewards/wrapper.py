@@ -46,6 +46,7 @@ class BonusWrapper(RewardModel):
         self.needs_next_obs = model.needs_next_obs
         self.uses_measures = model.uses_measures
         self.prefers_expert = model.prefers_expert
+        self.absorbing = model.absorbing
         # never is_true_reward: the true reward plus a bonus is not the true reward, so the
         # archive objective must go through predict_reward
 
@@ -77,6 +78,11 @@ class BonusWrapper(RewardModel):
     @override
     def reward(self, batch: TransitionBatch) -> torch.Tensor:
         return self.model.reward(batch)
+
+    @override
+    def absorbing_reward(self, batch: TransitionBatch) -> torch.Tensor:
+        # no bonus in the absorbing state: it is no cell of the archive and counts no visit
+        return self.model.absorbing_reward(batch)
 
     @override
     def update(

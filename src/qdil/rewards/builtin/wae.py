@@ -82,7 +82,9 @@ class WAEReward(AdversarialReward):
         regularization: λ (the paper: 1).
         reward_type: ``gail`` (−log(1 − σ(D(z̄)) + 1e-8), default), ``calibrated`` (the
             GAIL form of :func:`calibrated_logit`), ``standardized`` (the GAIL form of
-            :func:`standardized_logit`), ``critic`` (D(z̄)) or ``sigmoid`` (σ(D(z̄))).
+            :func:`standardized_logit`), ``standardized_logit`` (that logit ℓ itself, DAC's
+            log D − log(1 − D): signed, so an absorbing state can be worth less than
+            staying alive), ``critic`` (D(z̄)) or ``sigmoid`` (σ(D(z̄))).
         min_gap: smallest expert–policy critic gap that ``calibrated`` divides by, and
             (over 4) the smallest policy spread that ``standardized`` divides by.
         calibration_samples: policy transitions (at most) the calibration scores after
@@ -99,7 +101,9 @@ class WAEReward(AdversarialReward):
         latent_dim: int = 32,
         hidden: Sequence[int] = (100, 100),
         regularization: float = 1.0,
-        reward_type: Literal["gail", "calibrated", "standardized", "critic", "sigmoid"] = "gail",
+        reward_type: Literal[
+            "gail", "calibrated", "standardized", "standardized_logit", "critic", "sigmoid"
+        ] = "gail",
         min_gap: float = 1.0,
         calibration_samples: int = 8192,
         **kwargs: Any,
@@ -174,9 +178,11 @@ class WAEReward(AdversarialReward):
         if self.reward_type == "calibrated":
             expert_mean, policy_mean = self.critic_means.tolist()
             score = calibrated_logit(score, expert_mean, policy_mean, self.min_gap)
-        elif self.reward_type == "standardized":
+        elif self.reward_type in ("standardized", "standardized_logit"):
             policy_std = max(float(self.critic_policy_std), self.min_gap / 4)
             score = standardized_logit(score, float(self.critic_means[1]), policy_std)
+            if self.reward_type == "standardized_logit":
+                return score
         return gail_reward(score)
 
     @torch.no_grad()
@@ -205,7 +211,7 @@ class WAEReward(AdversarialReward):
         metrics["critic_expert_std"], metrics["critic_policy_std"] = (
             float(std_over(s, 0)) if len(s) > 1 else 0.0 for s in scores
         )
-        if self.reward_type in ("calibrated", "standardized"):  # the same scores, no 2nd pass
+        if self.reward_type in ("calibrated", "standardized", "standardized_logit"):  # no 2nd pass
             metrics["reward_expert"] = float(self.transform(scores[0]).mean())
             metrics["reward_policy"] = float(self.transform(scores[1]).mean())
         return metrics
