@@ -158,19 +158,28 @@ def test_a_missing_demo_file_says_how_to_make_one_and_leaves_no_run(
 
 
 @pytest.mark.parametrize(
-    ("reward", "options"),
+    ("reward", "options", "absorbing"),
     [
-        ("gail", ["--reward.reward_type", "logit"]),
-        ("mcwae_wgail", ["--bonus.enabled", "true", "--reward.reward_type", "standardized_logit"]),
+        ("gail", ["--reward.reward_type", "logit"], "learned"),
+        (
+            "mcwae_wgail",
+            ["--bonus.enabled", "true", "--reward.reward_type", "standardized_logit"],
+            "floor",
+        ),
     ],
 )
 def test_fit_with_absorbing_states_logs_what_a_fall_is_worth(
-    reward: str, options: list[str], walker_demos: Path, tmp_path: Path, monkeypatch
+    reward: str,
+    options: list[str],
+    absorbing: str,
+    walker_demos: Path,
+    tmp_path: Path,
+    monkeypatch,
 ) -> None:
     monkeypatch.chdir(tmp_path)
     main(
         [
-            "fit", str(RECIPE), "--reward", reward, *options, "--reward.absorbing", "true",
+            "fit", str(RECIPE), "--reward", reward, *options, "--reward.absorbing", absorbing,
             "--demos.path", str(walker_demos), "--name", reward, "--qd.iterations", "2",
         ]
     )  # fmt: skip
@@ -180,3 +189,6 @@ def test_fit_with_absorbing_states_logs_what_a_fall_is_worth(
     for row in rows:  # the smoke walker falls within its 50-step episodes
         assert float(row["survival/falls_per_1k_steps"]) > 0
         assert math.isfinite(float(row["reward/absorbing"]))
+    if absorbing == "floor":  # iteration 1 runs before any update: the floor is 0 then
+        assert float(rows[0]["reward/absorbing"]) == 0.0
+        assert float(rows[1]["reward/absorbing"]) < 0.0  # the lowest policy reward, signed

@@ -41,7 +41,7 @@ def _rollout(valid: torch.Tensor | None = None) -> Rollout:
 
 def _gail() -> GAIL:
     torch.manual_seed(0)
-    return GAIL(4, 2, 2, absorbing=True, reward_type="logit", use_measures=True)
+    return GAIL(4, 2, 2, absorbing="learned", reward_type="logit", use_measures=True)
 
 
 def test_a_batch_gains_one_flagged_copy_per_terminated_transition() -> None:
@@ -133,3 +133,20 @@ def test_the_bonus_passes_the_absorbing_state_through_and_other_models_refuse() 
         plain.absorbing_reward(rows)
     with pytest.raises(NotImplementedError, match=r"reward\.init_args\.absorbing"):
         PWIL(4, 2, 2).absorbing_reward(rows)
+
+
+def test_the_floor_is_the_lowest_policy_reward_after_the_update() -> None:
+    torch.manual_seed(0)
+    model = GAIL(4, 2, 2, absorbing="floor", reward_type="logit")
+    assert model.input_dim == 6  # no flag: nothing about the absorbing state is learned
+    rows = _rollout().flat()
+    assert torch.equal(model.absorbing_reward(rows), torch.zeros(len(rows)))  # before any
+    model.price_absorbing(rows)
+    with torch.no_grad():
+        lowest = model.reward(rows).min()
+    assert torch.equal(model.absorbing_reward(rows[:2]), torch.full((2,), float(lowest)))
+    copy = GAIL(4, 2, 2, absorbing="floor", reward_type="logit")
+    copy.load_state_dict(model.state_dict())  # checkpointed with the model
+    assert float(copy.absorbing_floor) == float(lowest)
+    with pytest.raises(ValueError, match="absorbing must be learned, floor or null"):
+        GAIL(4, 2, 2, absorbing="always")

@@ -317,6 +317,8 @@ def _walk_survival(
 def _update_reward(run: Run, expert: Any, policy: TransitionBatch) -> dict[str, float]:
     """The reward model's once-per-iteration update (decision D3), its metrics checked finite."""
     reward_metrics = run.reward.update(expert, policy, run.state.iteration)
+    if run.reward.absorbing:
+        run.reward.price_absorbing(policy)
     for key, value in reward_metrics.items():
         run.reward.check_finite(torch.as_tensor(value), f"update metric {key}", run.state.iteration)
     return reward_metrics

@@ -7,13 +7,13 @@ the expert transitions in shuffled minibatches of ``batch_size``, each paired wi
 policy transitions drawn from the iteration's rollouts ("Discriminator Num Epochs 1" in
 the paper's table). Every such model carries a gradient penalty (weight 10 by default), as
 the paper applies one to all online-trained reward models. With ``absorbing`` the model also
-learns what the absorbing state after a termination is worth (docs/concepts/absorbing.md).
+prices the absorbing state after a termination (docs/concepts/absorbing.md).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator
-from typing import Any
+from typing import Any, Literal
 
 import torch
 import torch.nn.functional as F
@@ -41,10 +41,12 @@ class AdversarialReward(RewardModel):
         batch_size: expert (and policy) transitions per gradient step.
         epochs: passes over the expert transitions per QD iteration (the paper: 1).
         gp_weight: weight of the gradient penalty (0 disables it).
-        absorbing: learn a reward for the absorbing state after a termination (DAC): x
-            gains a flag, 1 on absorbing transitions (copies of terminated ones), and every
-            update adds one per terminated transition on either side. The loop then adds
-            that state's worth where episodes terminate.
+        absorbing: price the absorbing state after a termination, which the loop then
+            credits where episodes terminate. ``learned`` (DAC): x gains a flag, 1 on
+            absorbing transitions (copies of terminated ones), and every update adds one per
+            terminated transition on either side. ``floor``: its reward is the lowest the
+            model gave a policy transition after its last update (0 before the first), for
+            demonstrations that never terminate. ``None``: off.
     """
 
     def __init__(
@@ -58,7 +60,7 @@ class AdversarialReward(RewardModel):
         batch_size: int = 200,
         epochs: int = 1,
         gp_weight: float = 10.0,
-        absorbing: bool = False,
+        absorbing: Literal["learned", "floor"] | None = None,
     ) -> None:
         super().__init__(obs_dim, action_dim, num_measures)
         if batch_size < 1 or epochs < 1:
@@ -71,20 +73,28 @@ class AdversarialReward(RewardModel):
         self.batch_size = batch_size
         self.epochs = epochs
         self.gp_weight = gp_weight
-        self.absorbing = absorbing
+        if absorbing not in (None, "learned", "floor"):
+            raise ValueError(
+                f"{type(self).__name__}: absorbing must be learned, floor or null, got "
+                f"{absorbing!r}"
+            )
+        self.absorbing_mode = absorbing
+        self.absorbing = absorbing is not None
+        if absorbing == "floor":  # checkpointed with the model
+            self.register_buffer("absorbing_floor", torch.zeros((), dtype=torch.float64))
 
     @property
     def input_dim(self) -> int:
         """Size of x."""
         measures = self.num_measures if self.use_measures else 0
-        return self.obs_dim + self.action_dim + measures + int(self.absorbing)
+        return self.obs_dim + self.action_dim + measures + int(self.absorbing_mode == "learned")
 
     def features(self, batch: TransitionBatch) -> torch.Tensor:
         """(B, input_dim) x = (s, a[, δ(s)][, absorbing]), standardised where continuous."""
         parts = [self.normalize_obs(batch.obs), self.normalize_actions(batch.actions)]
         if self.use_measures:
             parts.append(batch.contacts)
-        if self.absorbing:
+        if self.absorbing_mode == "learned":
             parts.append(batch.absorbing[:, None].to(parts[0].dtype))
         return torch.cat(parts, dim=1)
 
@@ -93,6 +103,8 @@ class AdversarialReward(RewardModel):
     def absorbing_reward(self, batch: TransitionBatch) -> torch.Tensor:
         if not self.absorbing:
             return super().absorbing_reward(batch)
+        if self.absorbing_mode == "floor":
+            return torch.full_like(batch.dones, float(self.absorbing_floor))
         was_training = self.training
         self.eval()
         rewards = self.reward(batch.absorbing_copies())
@@ -163,13 +175,23 @@ class AdversarialReward(RewardModel):
             "policy_acc": float((logit_p < 0).float().mean()),
         }
 
+    @override
+    @torch.no_grad()
+    def price_absorbing(self, policy: TransitionBatch) -> None:
+        if self.absorbing_mode != "floor":
+            return
+        was_training = self.training
+        self.eval()
+        self.absorbing_floor.fill_(float(self.reward(policy).min()))
+        self.train(was_training)
+
     def minibatches(
         self, expert: TransitionBatch, policy: TransitionBatch
     ) -> Iterator[tuple[TransitionBatch, TransitionBatch]]:
         """Pairs of (expert, policy) minibatches: ``epochs`` shuffled passes over the expert."""
         if len(expert) == 0 or len(policy) == 0:
             raise ValueError(f"{type(self).__name__}.update needs expert and policy transitions")
-        if self.absorbing:
+        if self.absorbing_mode == "learned":
             expert, policy = expert.with_absorbing(), policy.with_absorbing()
         size = min(self.batch_size, len(expert))
         for _ in range(self.epochs):

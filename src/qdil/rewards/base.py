@@ -254,6 +254,12 @@ class RewardModel(L.LightningModule):
             "reward; the adversarial models do (reward.init_args.absorbing: true)"
         )
 
+    def price_absorbing(self, policy: TransitionBatch) -> None:
+        """Set the absorbing state's price from the iteration's policy transitions.
+
+        Called after each update of a model with ``absorbing`` on (default: nothing to do).
+        """
+
     def extra_state(self) -> dict[str, Any]:
         """State beyond ``state_dict`` (counters, pools) for checkpoints."""
         return {}

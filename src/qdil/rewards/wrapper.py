@@ -85,6 +85,10 @@ class BonusWrapper(RewardModel):
         return self.model.absorbing_reward(batch)
 
     @override
+    def price_absorbing(self, policy: TransitionBatch) -> None:
+        self.model.price_absorbing(policy)
+
+    @override
     def update(
         self, expert: TransitionBatch | None, policy: TransitionBatch, iteration: int
     ) -> dict[str, float]:
