@@ -73,6 +73,10 @@ class EnvConfig:
         deterministic: ``warp`` backend: MuJoCo Warp's deterministic kernels, so that a GPU
             run repeats bit for bit (without them it does not; docs/guides/gpu.md). The
             ``mujoco`` backend and Warp's CPU device repeat without them.
+        integrator: ``euler``, ``rk4``, ``implicit`` or ``implicitfast`` in place of the task
+            model's own (Walker2d, Hopper, Humanoid, Ant: RK4; HalfCheetah: Euler); ``null``
+            keeps it. Another than the task's own is not the gymnasium task: the run's name
+            and its report's task say so (docs/guides/gpu.md#integrators).
         max_episode_steps: episode horizon (the paper: 1000).
         task_kwargs: gymnasium keyword arguments of the task (e.g. ``ctrl_cost_weight``).
     """
@@ -84,6 +88,7 @@ class EnvConfig:
     backend: Literal["mujoco", "warp"] = "mujoco"
     device: str = "cpu"
     deterministic: bool = False
+    integrator: Literal["euler", "rk4", "implicit", "implicitfast"] | None = None
     max_episode_steps: int = 1000
     task_kwargs: dict[str, Any] = field(default_factory=dict)
 

@@ -93,6 +93,7 @@ def _environment(
         backend=env.backend,
         device=device,
         deterministic=env.deterministic,
+        integrator=env.integrator,
         **env.task_kwargs,
     )
 

@@ -38,6 +38,15 @@ SMOKE_IL = str(ROOT / "recipes" / "smoke" / "walker_il.yaml")
         ([RECIPES / "walker_gail_ebc.yaml", "--bonus.enabled", "false"], "walker_gail"),
         ([RECIPES / "walker_gail_ebc.yaml", "--bonus.type", "single_step"], "walker_gail_bonus"),
         ([SMOKE_IL, "--bonus.enabled", "true"], "walker_il_bonus"),
+        # another integrator than the task model's own: not the v5 task, and named so
+        ([FLAGSHIP, "--env.integrator", "euler"], "walker_mcwae_euler"),
+        ([FLAGSHIP, "--env.integrator", "rk4"], "walker_mcwae"),  # Walker2d's own
+        (
+            [FLAGSHIP, "--reward", "gail", "--env.integrator=implicitfast"],
+            "walker_gail_bonus_implicitfast",
+        ),
+        ([RECIPES / "halfcheetah_ppga.yaml", "--env.integrator", "euler"], "halfcheetah_ppga"),
+        ([RECIPES / "halfcheetah_ppga.yaml", "--env.integrator", "rk4"], "halfcheetah_ppga_rk4"),
     ],
 )
 def test_the_default_name_follows_the_method_that_runs(argv: list, stem: str) -> None:
@@ -91,3 +100,8 @@ def test_fit_makes_the_run_directory_under_that_name(tmp_path: Path, monkeypatch
     with pytest.raises(Built):
         fit_module.fit([FLAGSHIP, "--reward", "gail", "--bonus.enabled", "false"])
     assert seen == {"name": "walker_gail-seed0", "run_dir": Path("runs") / "walker_gail-seed0"}
+
+
+def test_an_unknown_integrator_is_refused_naming_the_key() -> None:
+    with pytest.raises(SystemExit, match="integrator"):
+        parse_fit([FLAGSHIP, "--env.integrator", "verlet"])

@@ -14,6 +14,7 @@ from scipy.stats import tukey_hsd
 
 from qdil.evaluation import document as doc
 from qdil.evaluation.configurations import flag_duplicate_seeds
+from qdil.evaluation.methods import method_label
 from qdil.evaluation.profiles import archive_profile, method_profile, profile_levels
 from qdil.evaluation.report import (
     colour_range,
@@ -22,9 +23,9 @@ from qdil.evaluation.report import (
     main_table,
     tukey_tests,
 )
-from qdil.evaluation.runs import RunResult, find_runs, group_runs, method_label
+from qdil.evaluation.runs import RunResult, find_runs, group_runs
 from qdil.evaluation.stats import Summary, align_curves, format_mean_std, summarize, tukey
-from qdil.evaluation.tables import ratio_records, ratio_table, table_records
+from qdil.evaluation.tables import ratio_records, ratio_table, run_records, table_records
 
 
 def test_summarize_uses_the_sample_std() -> None:
@@ -130,6 +131,21 @@ def test_main_table_rows_and_single_seed_cells() -> None:
     assert gail[3] == "50.00 ± 0.00"
     assert gail[7] == "2.00e+06 (n=1)"
     assert rows[0][6] == "–"  # no true-reward run on Hopper
+
+
+def test_another_integrator_is_another_task_column() -> None:
+    runs = [fake_run("Walker2d-v5", "GAIL", 1e6, s) for s in range(2)]
+    euler = [fake_run("Walker2d-v5", "GAIL", 4e6, s) for s in range(2)]
+    for run in euler:
+        run.integrator = "euler"
+    runs += [*euler, fake_run("HalfCheetah-v5", "GAIL", 2e6)]
+    groups = group_runs(runs)
+    # the paper's order, the changed integrator beside its task; never pooled with v5 runs
+    assert list(groups) == ["HalfCheetah-v5", "Walker2d-v5", "Walker2d-v5 (euler)"]
+    assert groups["Walker2d-v5 (euler)"]["GAIL"] == euler
+    header = main_table(groups)[0]
+    assert "Walker2d (euler) QD-Score" in header and "Walker2d QD-Score" in header
+    assert run_records(euler)[0]["task"] == "Walker2d-v5 (euler)"
 
 
 def test_deployable_tables_and_ratios_use_the_runs_that_have_that_archive() -> None:

@@ -36,6 +36,28 @@ def _bonus_tag(bonus: Any) -> str:
 def run_stem(stem: str, recipe: dict, config: Namespace) -> str:
     """The stem of a new run's default name (``<stem>-seed<seed>``): what ran, in words.
 
+    The method's stem (:func:`method_stem`), then, when ``env.integrator`` replaces the
+    task model's own, ``_`` and its name: ``walker_ppga.yaml --env.integrator euler`` gives
+    ``walker_ppga_euler`` (a stem that already ends with it keeps it).
+    """
+    stem = method_stem(stem, recipe, config)
+    integrator = getattr(config.env, "integrator", None)
+    if integrator is None or stem.endswith(f"_{integrator}"):
+        return stem
+    from qdil.envs.integrators import changed_integrator  # imports MuJoCo: only when asked
+    from qdil.envs.tasks import make_task
+
+    try:
+        task = make_task(config.env.task, **(config.env.task_kwargs or {}))
+    except (ValueError, FileNotFoundError):  # the run's own check names the bad task
+        return stem
+    changed = changed_integrator(task.xml_path, integrator)
+    return f"{stem}_{changed}" if changed else stem
+
+
+def method_stem(stem: str, recipe: dict, config: Namespace) -> str:
+    """The stem of what ran: the recipe's, or the method the command line changed it to.
+
     The recipe file's stem, unless the command line changed the method. When it replaced
     the recipe's reward model (``--reward gail``), the stem's first ``_``-separated part,
     the registered name of the model that runs and, if a bonus is on, ``_bonus`` or

@@ -75,6 +75,7 @@ def record_episodes(
     seed: int = 0,
     max_episode_steps: int = 1000,
     task_kwargs: dict[str, Any] | None = None,
+    integrator: str | None = None,
 ) -> tuple[DemoSet, np.ndarray, np.ndarray]:
     """One deterministic episode per policy, recorded step by step.
 
@@ -87,6 +88,7 @@ def record_episodes(
         seed: reset seed (policy i's episode starts from seed + i).
         max_episode_steps: horizon.
         task_kwargs: gymnasium keyword arguments of the task.
+        integrator: ``env.integrator`` of the run (None: the task model's own).
 
     Returns:
         The demonstrations and the (T, nq), (T, nv) MuJoCo states of each s_t.
@@ -97,6 +99,7 @@ def record_episodes(
         num,
         max_episode_steps=max_episode_steps,
         autoreset_mode="Disabled",
+        integrator=integrator,
         **(task_kwargs or {}),
     )
     actor = VectorizedActor(
@@ -201,6 +204,7 @@ def demos_from_run(
         seed=seed,
         max_episode_steps=int(env.get("max_episode_steps", 1000)),
         task_kwargs=env.get("task_kwargs") or {},
+        integrator=env.get("integrator"),
     )
     commit, dirty = git_state()
     metadata = {

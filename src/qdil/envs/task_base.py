@@ -10,6 +10,7 @@ the termination of the robots that can fall; the tasks themselves are in
 from __future__ import annotations
 
 import abc
+import warnings
 from collections.abc import Mapping
 from pathlib import Path
 from typing import ClassVar
@@ -20,6 +21,8 @@ import numpy as np
 from typing_extensions import override
 
 from qdil.envs.arrays import namespace
+from qdil.envs.integrators import set_integrator
+from qdil.envs.physics import add_contact_sensors
 from qdil.envs.physics_base import Export
 
 _ASSETS = Path(gymnasium.__file__).parent / "envs" / "mujoco" / "assets"
@@ -66,6 +69,22 @@ class LocomotionTask(abc.ABC):
         self.frame_skip = self.default_frame_skip if frame_skip is None else int(frame_skip)
         if self.frame_skip < 1:
             raise ValueError(f"frame_skip must be at least 1, got {frame_skip}")
+
+    def compile(self, integrator: str | None = None) -> mujoco.MjModel:
+        """The task's model: a contact sensor per foot, the task's solver, ``integrator``.
+
+        Args:
+            integrator: a name of :data:`qdil.envs.integrators.INTEGRATORS` in place of the
+                model file's, or ``None`` to keep it (the gymnasium task).
+        """
+        spec = mujoco.MjSpec.from_file(str(self.xml_path))
+        add_contact_sensors(spec, self.feet, self.floor)
+        if self.solver is not None:
+            spec.option.solver = getattr(mujoco.mjtSolver, f"mjSOL_{self.solver.upper()}")
+        set_integrator(spec, integrator)
+        with warnings.catch_warnings():  # half_cheetah.xml's deprecated settotalmass
+            warnings.simplefilter("ignore")
+            return spec.compile()
 
     def bind(self, model: mujoco.MjModel, init_qpos: np.ndarray, init_qvel: np.ndarray) -> None:
         """Remember the compiled model's constants the formulas need."""

@@ -17,7 +17,6 @@ Beyond gymnasium's keys, every ``info`` carries ``foot_contact`` and ``episode``
 
 from __future__ import annotations
 
-import warnings
 from functools import partial
 from typing import Any
 
@@ -31,7 +30,6 @@ from gymnasium.vector.utils import batch_space
 
 from qdil.devices import run_device
 from qdil.envs.backends import make_physics
-from qdil.envs.physics import add_contact_sensors
 from qdil.envs.rendering import CAMERA_DISTANCE, RENDER_MODES, StateRenderer
 from qdil.envs.tasks import LocomotionTask, make_task
 
@@ -56,6 +54,8 @@ class LocomotionVectorEnv(VectorEnv):
             checked here with ``backend`` (:func:`qdil.devices.run_device`), before
             anything is built.
         deterministic: ``warp``: MuJoCo Warp's deterministic kernels (``env.deterministic``).
+        integrator: one in place of the model file's (``env.integrator``,
+            :mod:`qdil.envs.integrators`); ``None`` keeps it: the gymnasium task.
         render_mode: ``"rgb_array"``: :meth:`render` draws the first simulation
             (:mod:`qdil.envs.rendering`); ``None``: no rendering.
         **task_kwargs: gymnasium's keyword arguments of the task, e.g. ``ctrl_cost_weight``.
@@ -82,6 +82,7 @@ class LocomotionVectorEnv(VectorEnv):
         device: str | torch.device = "cpu",
         render_mode: str | None = None,
         deterministic: bool = False,
+        integrator: str | None = None,
         **task_kwargs: Any,
     ) -> None:
         self.backend, self.device = backend, run_device(backend, device)
@@ -94,6 +95,7 @@ class LocomotionVectorEnv(VectorEnv):
             backend=backend,
             device=self.device,
             deterministic=deterministic,
+            integrator=integrator,
             **task_kwargs,
         )
         if isinstance(task, str):
@@ -116,13 +118,7 @@ class LocomotionVectorEnv(VectorEnv):
         self.render_mode = render_mode
         self._renderer: StateRenderer | None = None
 
-        spec = mujoco.MjSpec.from_file(str(task.xml_path))
-        add_contact_sensors(spec, task.feet, task.floor)
-        if task.solver is not None:
-            spec.option.solver = getattr(mujoco.mjtSolver, f"mjSOL_{task.solver.upper()}")
-        with warnings.catch_warnings():  # half_cheetah.xml's deprecated settotalmass
-            warnings.simplefilter("ignore")
-            self.model = spec.compile()
+        self.model = task.compile(integrator)
         reference = mujoco.MjData(self.model)
         task.bind(self.model, reference.qpos.ravel().copy(), reference.qvel.ravel().copy())
         self.metadata["render_fps"] = round(1 / task.dt)  # real time, as gymnasium's envs

@@ -83,7 +83,7 @@ def _join_labels(runs: list[Configured]) -> None:
         labels = {
             other.method
             for other in labelled
-            if other.task == run.task and not differing_keys(run.config, other.config)
+            if other.task_label == run.task_label and not differing_keys(run.config, other.config)
         }
         if len(labels) == 1 and run.method not in labels:
             (label,) = labels
@@ -101,7 +101,7 @@ def separate_configurations(runs: Iterable[Configured]) -> None:
     _join_labels(included)
     groups: dict[tuple[str | None, str | None], list[Configured]] = {}
     for run in included:
-        groups.setdefault((run.task, run.method), []).append(run)
+        groups.setdefault((run.task_label, run.method), []).append(run)
     for (_, method), members in groups.items():
         parts = _partition(members)
         if len(parts) < 2:

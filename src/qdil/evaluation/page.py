@@ -244,7 +244,7 @@ def _runs_table(runs: Sequence[RunResult]) -> tuple[list[str], list[list[str]]]:
     rows = [
         [
             f"`{run.path}`",
-            run.task or "–",
+            run.task_label or "–",
             run.method or "–",
             "–" if run.seed is None else str(run.seed),
             f"{run.iteration if run.iteration is not None else '–'} / {run.target or '–'}",

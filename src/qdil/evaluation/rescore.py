@@ -41,6 +41,7 @@ class ReplaySettings:
         task: gymnasium task id.
         max_episode_steps: the run's horizon.
         task_kwargs: gymnasium keyword arguments of the task.
+        integrator: ``env.integrator`` (None: the task model's own).
         actor_hidden: widths of the actor's hidden layers.
         obs_clip: bound of normalised observations.
     """
@@ -50,6 +51,7 @@ class ReplaySettings:
     task_kwargs: dict[str, Any]
     actor_hidden: tuple[int, ...]
     obs_clip: float
+    integrator: str | None = None
 
     @classmethod
     def of_run(cls, run_dir: str | Path) -> ReplaySettings:
@@ -63,6 +65,7 @@ class ReplaySettings:
             task_kwargs=env.get("task_kwargs") or {},
             actor_hidden=actor_hidden,
             obs_clip=obs_clip,
+            integrator=env.get("integrator"),
         )
 
     def make_env(
@@ -81,6 +84,7 @@ class ReplaySettings:
             max_episode_steps=max_episode_steps or self.max_episode_steps,
             autoreset_mode="Disabled",
             num_threads=num_threads,
+            integrator=self.integrator,
             **self.task_kwargs,
         )
 

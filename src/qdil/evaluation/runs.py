@@ -1,4 +1,4 @@
-"""Run directories as ``qdil report`` sees them: discovery, method labels, final archives.
+"""Run directories as ``qdil report`` sees them: discovery, tasks, final archives.
 
 :func:`collect_runs` finds and reads every run (:func:`load_run`); a run's final numbers come
 from ``qdil eval``'s corrected archives when they were made from its checkpoint, else from
@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import contextlib
 import csv
-import importlib
 import json
 import math
 import pickle
@@ -23,6 +22,9 @@ import numpy as np
 import yaml
 from ribs.archives import GridArchive
 
+from qdil.envs.integrators import changed_integrator, task_label
+from qdil.envs.tasks import make_task
+from qdil.evaluation.methods import DISPLAY_NAMES, method_label
 from qdil.evaluation.records import RecordError, is_record, read_record
 from qdil.evaluation.rescore import CORRECTED, EVAL_JSON
 from qdil.files import CONFIG_NAME
@@ -32,22 +34,6 @@ from qdil.qd.checkpoint import CheckpointError, load_archives
 from qdil.upgrades import upgraded
 
 METRICS_NAME = "metrics.csv"
-
-DISPLAY_NAMES: dict[str, str] = {
-    "true_reward": "PPGA-trueReward",
-    "gail": "GAIL",
-    "airl": "AIRL",
-    "pwil": "PWIL",
-    "maxentirl": "MaxEntIRL",
-    "giril": "GIRIL",
-    "wae_gail": "WAE-GAIL",
-    "wae_wgail": "WAE-WGAIL",
-    "mcwae_wgail": "mCWAE-WGAIL",
-    "mcwae_gail": "mCWAE-GAIL",
-    "vail": "VAIL",
-    "diffail": "DiffAIL",
-}
-"""Registry names of reward models -> the names the paper's tables use."""
 
 TASK_ORDER = ("HalfCheetah-v5", "Walker2d-v5", "Humanoid-v5")
 """The paper's column order; other tasks follow, sorted."""
@@ -60,6 +46,8 @@ class RunResult:
     Attributes:
         path: the run directory.
         task: ``env.task`` of its config (``None`` if unreadable).
+        integrator: ``env.integrator`` where it is not the task model's own, else ``None``;
+            such a run is grouped under its own task, :attr:`task_label`.
         method: the method label (see :func:`method_label`).
         seed: the recipe's seed.
         target: ``qd.iterations`` of the recipe.
@@ -80,6 +68,7 @@ class RunResult:
 
     path: Path
     task: str | None = None
+    integrator: str | None = None
     method: str | None = None
     seed: int | None = None
     target: int | None = None
@@ -95,6 +84,11 @@ class RunResult:
     deployable_source: str = ""
     config: dict[str, Any] = field(default_factory=dict)
     labelled: bool = False
+
+    @property
+    def task_label(self) -> str | None:
+        """The task as the report groups and names it: ``Walker2d-v5 (euler)`` if changed."""
+        return None if self.task is None else task_label(self.task, self.integrator)
 
     @property
     def included(self) -> bool:
@@ -157,44 +151,6 @@ def find_runs(paths: Iterable[str | Path]) -> tuple[list[Path], list[RunResult]]
             if run.resolve() not in {r.resolve() for r in runs}:
                 runs.append(run)
     return runs, missing
-
-
-def reward_name(config: Mapping[str, Any]) -> str:
-    """The reward model's registry name, or the last component of its class path.
-
-    Args:
-        config: a resolved recipe (``config.yaml``).
-    """
-    reward = config.get("reward")
-    class_path = reward.get("class_path", "") if isinstance(reward, Mapping) else str(reward)
-    if "." not in class_path:
-        return class_path
-    from qdil.rewards import discover
-
-    discover()
-    module, _, qualname = class_path.rpartition(".")
-    try:
-        cls = getattr(importlib.import_module(module), qualname)
-        return getattr(cls, "name", "") or qualname
-    except Exception:  # a plugin that is not installed here: fall back to the class name
-        return qualname
-
-
-def method_label(config: Mapping[str, Any]) -> str:
-    """The paper's name of a run's method: reward model plus ``-Bonus`` or ``-EBC``.
-
-    Registry names map through :data:`DISPLAY_NAMES` (``mcwae_wgail`` -> ``mCWAE-WGAIL``);
-    unknown names stay as they are.
-
-    Args:
-        config: a resolved recipe (``config.yaml``).
-    """
-    name = reward_name(config)
-    label = DISPLAY_NAMES.get(name, DISPLAY_NAMES.get(name.lower(), name))
-    bonus = config.get("bonus") or {}
-    if isinstance(bonus, Mapping) and bonus.get("enabled"):
-        label += "-EBC" if bonus.get("type") == "ebc" else "-Bonus"
-    return label
 
 
 def read_curves(path: Path) -> dict[str, tuple[np.ndarray, np.ndarray]]:
@@ -315,6 +271,18 @@ def _training_deployable(run: RunResult, deployable: Any, offset: float) -> None
     run.deployable_source = run.source
 
 
+def _changed_integrator(task: str, env: Mapping[str, Any]) -> str | None:
+    """``env.integrator`` where it is not the task model's own, else None."""
+    asked = env.get("integrator")
+    if asked is None:
+        return None
+    try:
+        xml = make_task(task, **(env.get("task_kwargs") or {})).xml_path
+        return changed_integrator(xml, asked)
+    except (ValueError, FileNotFoundError):  # a task not known here: as the run asked
+        return str(asked)
+
+
 def load_run(path: Path, label: str | None = None) -> RunResult:
     """Read one run directory: config, learning curves, final archive and metrics.
 
@@ -333,6 +301,7 @@ def load_run(path: Path, label: str | None = None) -> RunResult:
     except (OSError, yaml.YAMLError, KeyError, TypeError) as error:
         run.problems.append(f"{CONFIG_NAME} unreadable or without env.task ({error!r})")
         return run
+    run.integrator = _changed_integrator(run.task, config["env"])
     run.method, run.labelled, run.config = label or method_label(config), bool(label), config
     run.seed = config.get("seed")
     run.target = (config.get("qd") or {}).get("iterations")
@@ -366,8 +335,13 @@ def group_runs(runs: Iterable[RunResult]) -> Groups:
     groups: Groups = {}
     for run in runs:
         if run.included:
-            groups.setdefault(run.task, {}).setdefault(run.method, []).append(run)
-    tasks = sorted(groups, key=lambda t: (TASK_ORDER.index(t) if t in TASK_ORDER else 99, t))
+            groups.setdefault(run.task_label, {}).setdefault(run.method, []).append(run)
+
+    def order(label: str) -> tuple[int, str]:  # a changed integrator beside its task
+        task = label.split(" (")[0]
+        return (TASK_ORDER.index(task) if task in TASK_ORDER else 99, label)
+
+    tasks = sorted(groups, key=order)
     first = DISPLAY_NAMES["true_reward"]
     return {
         task: {

@@ -14,12 +14,9 @@ from typing import Any
 
 import numpy as np
 
+from qdil.evaluation.methods import DISPLAY_NAMES
 from qdil.evaluation.ratios import ratio_of_means, seeds_to_resolve
-from qdil.evaluation.runs import (
-    DISPLAY_NAMES,
-    Groups,
-    RunResult,
-)
+from qdil.evaluation.runs import Groups, RunResult
 from qdil.evaluation.stats import (
     Comparison,
     TukeyResult,
@@ -60,7 +57,9 @@ def scored(runs: Sequence[RunResult], archive: str = "true") -> list[RunResult]:
 
 
 def _short(task: str) -> str:
-    return task.split("-v")[0]
+    """``Walker2d`` for ``Walker2d-v5``, ``Walker2d (euler)`` for another integrator's."""
+    name, _, changed = task.partition(" ")
+    return name.split("-v")[0] + (f" {changed}" if changed else "")
 
 
 def _count(runs: Sequence[RunResult]) -> str:
@@ -313,7 +312,7 @@ def run_records(runs: Sequence[RunResult]) -> list[dict[str, Any]]:
     for run in runs:
         record: dict[str, Any] = {
             "path": str(run.path),
-            "task": run.task or "",
+            "task": run.task_label or "",
             "method": run.method or "",
             "seed": "" if run.seed is None else run.seed,
             "status": run.status,

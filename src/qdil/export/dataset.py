@@ -84,6 +84,7 @@ def export_dataset(
         seed=seed,
         max_episode_steps=settings.max_episode_steps,
         task_kwargs=settings.task_kwargs,
+        integrator=settings.integrator,
     )
     cells = archive.int_to_grid_index(elites["index"][rows])
     buffers = []
@@ -116,6 +117,8 @@ def export_dataset(
         f"(iteration {iteration}), {episodes} deterministic episode(s) each; infos: "
         f"foot_contact of each state, the elite's measures and cell. qdil commit {commit}."
     )
+    if settings.integrator is not None:  # the env spec below is gymnasium's task
+        description += f" Stepped with MuJoCo's {settings.integrator} integrator (env.integrator)."
     with warnings.catch_warnings():
         warnings.filterwarnings("ignore", message=".*author.*")  # no person to name here
         warnings.filterwarnings("ignore", message=".*code_permalink.*")  # none without a commit

@@ -71,6 +71,7 @@ def scoring_episodes(
         seed=seed,
         max_episode_steps=settings.max_episode_steps,
         task_kwargs=settings.task_kwargs,
+        integrator=settings.integrator,
     )
     starts = np.r_[0, demos.episode_ends[:-1]]
     return [
@@ -147,6 +148,7 @@ def export_policies(
         metadata = {
             "task": settings.task,
             "task_kwargs": settings.task_kwargs,
+            "integrator": settings.integrator,  # None: the task model's own (the v5 task)
             "max_episode_steps": settings.max_episode_steps,
             "file": path.name,
             "format": fmt,
