@@ -1,4 +1,4 @@
-"""Recipes of older runs, read as today's: classes that moved and keys that moved.
+"""Recipes of older runs, read as today's: classes, keys and values that moved.
 
 A run directory keeps its resolved recipe (``config.yaml``, and a copy in every checkpoint);
 one written before a class or key moved still resumes, re-scores and reports, because every
@@ -21,6 +21,12 @@ MOVED_KEYS = {
     ("rl", "init_args", "obs_clip"): ("policy", "obs_clip"),
 }
 """Keys that older recipes hold, and where they are now (the policy family left VPPO)."""
+
+MOVED_VALUES = {
+    ("reward", "init_args", "absorbing"): {True: "learned", False: None},
+}
+"""Values that older recipes hold, and what they are now (``absorbing: true`` was DAC's
+learned absorbing state before ``floor`` joined it)."""
 
 
 def _classes(value: Any) -> Any:
@@ -55,6 +61,13 @@ def upgraded(content: dict[str, Any]) -> dict[str, Any]:
                 target[part] = {}
             target = target[part]
         target.setdefault(new[-1], value)
+    for key, values in MOVED_VALUES.items():
+        parent = content
+        for part in key[:-1]:
+            parent = parent.get(part) if isinstance(parent, dict) else None
+        value = parent.get(key[-1]) if isinstance(parent, dict) else None
+        if isinstance(value, bool) and value in values:  # True and 1 differ here
+            parent[key[-1]] = values[value]
     return content
 
 

@@ -116,3 +116,18 @@ def test_a_recipe_of_an_older_run_with_a_moved_class_still_parses(tmp_path: Path
     (tmp_path / "old.yaml").write_text(yaml.safe_dump(recipe))
     config, _, _ = parse_fit([str(tmp_path / "old.yaml")])
     assert isinstance(fit_parser().instantiate(config).executor, LocalExecutor)
+
+
+def test_absorbing_true_of_an_older_run_reads_as_learned() -> None:
+    """Runs of the first absorbing option stored ``absorbing: true`` (DAC's learned state)."""
+    from qdil.upgrades import upgraded
+
+    old = {"reward": {"class_path": "gail", "init_args": {"absorbing": True}}}
+    assert upgraded(old)["reward"]["init_args"]["absorbing"] == "learned"
+    assert old["reward"]["init_args"]["absorbing"] is True  # the caller's copy is kept
+    assert upgraded({"reward": {"init_args": {"absorbing": False}}})["reward"]["init_args"] == {
+        "absorbing": None
+    }
+    for value in ("floor", None, 1):  # today's values, and what is not a bool, unchanged
+        kept = upgraded({"reward": {"init_args": {"absorbing": value}}})
+        assert kept["reward"]["init_args"]["absorbing"] == value

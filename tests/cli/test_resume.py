@@ -223,6 +223,24 @@ def test_keys_added_later_resume_when_a_checkpoint_lacks_them_at_their_implicit_
     assert config_differences(bonus, current) == ["bonus.type: 'single_step' -> 'ebc'"]
 
 
+def test_every_recorded_run_would_resume_with_the_code_of_today() -> None:
+    """Runs made before a key was added resume (IMPLICIT_KEYS): each record's config.yaml,
+    parsed as ``qdil fit --resume`` parses it, against itself as its checkpoint stored it."""
+    from qdil.cli.fit import fit_parser, parse_fit
+    from qdil.upgrades import upgraded
+
+    root = Path(__file__).resolve().parents[2] / "docs" / "reports"
+    records = sorted({path.parent for path in root.glob("*/runs/*/config.yaml")})
+    assert len(records) > 20
+    parser = fit_parser()
+    for record in records:
+        stored = yaml.safe_load((record / "config.yaml").read_text())
+        config = parse_fit(["--resume", str(record)])[0]
+        config.name = stored.get("name")
+        current = yaml.safe_load(parser.dump(config, skip_unset=False))
+        assert config_differences(upgraded(stored), current) == [], record
+
+
 def test_checkpoint_minutes_saves_between_distant_iteration_checkpoints(
     tmp_path: Path, monkeypatch
 ) -> None:
