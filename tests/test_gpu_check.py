@@ -42,6 +42,20 @@ def test_the_check_runs_every_step_on_the_cpu(tmp_path: Path, monkeypatch) -> No
         assert [row["iteration"] for row in saved[key]] == [1, 2]
         for row in saved[key]:
             assert {"jacobian_seconds", "walk_seconds", "evaluate_seconds"} <= set(row)
+    # a paper-scale iteration of each task, and Walker2d's with the cheapest integrator
+    for key in ("iterations_halfcheetah", "iterations_humanoid"):
+        assert [row["iteration"] for row in saved[key]] == [1, 2]
+    costs = saved["integrators"]
+    assert set(costs) == {"Walker2d-v5", "HalfCheetah-v5", "Humanoid-v5"}
+    assert {row["own"] for row in costs.values()} == {"rk4", "euler"}
+    assert all(row["euler"] > 0 and row["rk4"] > 0 for row in costs.values())
+    cheapest = saved["iterations_cheapest"]
+    walker = {k: v for k, v in costs["Walker2d-v5"].items() if isinstance(v, float)}
+    assert cheapest["integrator"] == min(walker, key=walker.get)
+    assert [row["iteration"] for row in cheapest["rows"]] == [1, 2]
+    # two seeds of one sweep (on the CPU without a GPU to share), both through two iterations
+    packed = saved["packed"]
+    assert [[row["iteration"] for row in rows] for rows in packed["iterations"]] == [[1, 2]] * 2
     # two seeds at once, each its own `qdil fit` process, both through two iterations
     side = saved["side_by_side"]
     assert side["runs"] == 2 and not side["timed_out"]
@@ -59,6 +73,13 @@ def test_the_check_runs_every_step_on_the_cpu(tmp_path: Path, monkeypatch) -> No
     table = (tmp_path / "out" / "gpu_check.md").read_text()
     assert "| 6 |" in table and "| 2 |" in table and "skipped" in table
     assert "2 runs at once" in table
+    assert "| ms per env step | own |" in table and "half a GPU each" in table
+    assert saved["kept"] == []
+    # called again on the same card with the same folder: every step measured is kept
+    again = _gpu_check().main([*args, "--budget", "3600"])
+    assert again["kept"] == [key for key in again["kept"] if key in saved] and again["errors"] == {}
+    assert "iterations_humanoid" in again["kept"] and "packed" in again["kept"]
+    assert again["iterations"] == saved["iterations"] and "iterations_in_turns" not in again
 
 
 def test_a_failed_step_is_reported_and_the_others_still_run(tmp_path: Path) -> None:
@@ -66,7 +87,8 @@ def test_a_failed_step_is_reported_and_the_others_still_run(tmp_path: Path) -> N
         [
             *("--device", "cpu", "--quick", "--out", str(tmp_path)),
             "--skip=repeatability,breakdown,floor,throughput,iterations_in_turns,iterations_wide,"
-            "iterations_graphed,iterations_deterministic,side_by_side,tests",
+            "iterations_graphed,iterations_deterministic,side_by_side,tests,integrators,"
+            "iterations_halfcheetah,iterations_humanoid,iterations_cheapest,packed",
             "--set=--env.num_envs 5",  # not divisible by Walker2d's k + 1 = 3
         ]
     )
@@ -88,7 +110,10 @@ def test_runs_side_by_side_cut_by_the_budget_keep_what_they_recorded(tmp_path: P
 def test_steps_left_when_the_budget_is_spent_are_listed(tmp_path: Path) -> None:
     check = _gpu_check()
     result = check.main(["--device", "cpu", "--quick", "--out", str(tmp_path), "--budget", "0"])
-    assert result["errors"] == {} and "seconds" not in result  # nothing began
-    assert result["not_run"][:4] == ["machine", "tests", "repeatability", "breakdown"]
+    assert result["errors"] == {} and result["seconds"] == {}  # nothing began
+    assert result["machine"]["card"] == "Warp CPU device"  # the card is always named
+    assert result["not_run"][:3] == ["tests", "iterations", "iterations_halfcheetah"]
     assert "iterations_graphed" in result["not_run"]
-    assert "- not run, the budget spent: machine, tests" in (tmp_path / "gpu_check.md").read_text()
+    assert (
+        "- not run, the budget spent: tests, iterations," in (tmp_path / "gpu_check.md").read_text()
+    )
