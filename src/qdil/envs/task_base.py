@@ -22,7 +22,6 @@ from typing_extensions import override
 
 from qdil.envs.arrays import namespace
 from qdil.envs.integrators import set_integrator
-from qdil.envs.physics import add_contact_sensors
 from qdil.envs.physics_base import Export
 
 _ASSETS = Path(gymnasium.__file__).parent / "envs" / "mujoco" / "assets"
@@ -77,6 +76,8 @@ class LocomotionTask(abc.ABC):
             integrator: a name of :data:`qdil.envs.integrators.INTEGRATORS` in place of the
                 model file's, or ``None`` to keep it (the gymnasium task).
         """
+        from qdil.envs.physics import add_contact_sensors  # numba and torch: only to build
+
         spec = mujoco.MjSpec.from_file(str(self.xml_path))
         add_contact_sensors(spec, self.feet, self.floor)
         if self.solver is not None:
