@@ -44,14 +44,12 @@ def run_stem(stem: str, recipe: dict, config: Namespace) -> str:
     integrator = getattr(config.env, "integrator", None)
     if integrator is None or stem.endswith(f"_{integrator}"):
         return stem
-    from qdil.envs.integrators import changed_integrator  # imports MuJoCo: only when asked
-    from qdil.envs.tasks import make_task
+    from qdil.envs.tasks import changed_for_task  # imports MuJoCo: only when asked
 
     try:
-        task = make_task(config.env.task, **(config.env.task_kwargs or {}))
+        changed = changed_for_task(config.env.task, config.env.task_kwargs, integrator)
     except (ValueError, FileNotFoundError):  # the run's own check names the bad task
         return stem
-    changed = changed_integrator(task.xml_path, integrator)
     return f"{stem}_{changed}" if changed else stem
 
 

@@ -18,6 +18,7 @@ from __future__ import annotations
 import inspect
 from typing import Any
 
+from qdil.envs.integrators import changed_integrator
 from qdil.envs.planar import HalfCheetah, Hopper, Walker2d
 from qdil.envs.spatial import Ant, Humanoid
 from qdil.envs.task_base import Arrays, LocomotionTask
@@ -33,6 +34,7 @@ __all__ = [
     "HumanoidNewton",
     "LocomotionTask",
     "Walker2d",
+    "changed_for_task",
     "make_task",
 ]
 
@@ -77,3 +79,14 @@ def make_task(name: str, **kwargs: Any) -> LocomotionTask:
         raise ValueError(
             f"{name}: {error}. Keyword arguments accepted: {', '.join(allowed)}"
         ) from None
+
+
+def changed_for_task(task: str, task_kwargs: dict | None, name: str | None) -> str | None:
+    """``env.integrator`` ``name`` if it is not the model's own of ``task``, else None.
+
+    Raises:
+        ValueError, FileNotFoundError: an unknown task or keyword, a missing model file.
+    """
+    if name is None:
+        return None
+    return changed_integrator(make_task(task, **(task_kwargs or {})).xml_path, name)

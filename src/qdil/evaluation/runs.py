@@ -22,8 +22,8 @@ import numpy as np
 import yaml
 from ribs.archives import GridArchive
 
-from qdil.envs.integrators import changed_integrator, task_label
-from qdil.envs.tasks import make_task
+from qdil.envs.integrators import task_label
+from qdil.envs.tasks import changed_for_task
 from qdil.evaluation.methods import DISPLAY_NAMES, method_label
 from qdil.evaluation.records import RecordError, is_record, read_record
 from qdil.evaluation.rescore import CORRECTED, EVAL_JSON
@@ -274,11 +274,8 @@ def _training_deployable(run: RunResult, deployable: Any, offset: float) -> None
 def _changed_integrator(task: str, env: Mapping[str, Any]) -> str | None:
     """``env.integrator`` where it is not the task model's own, else None."""
     asked = env.get("integrator")
-    if asked is None:
-        return None
     try:
-        xml = make_task(task, **(env.get("task_kwargs") or {})).xml_path
-        return changed_integrator(xml, asked)
+        return changed_for_task(task, env.get("task_kwargs"), asked)
     except (ValueError, FileNotFoundError):  # a task not known here: as the run asked
         return str(asked)
 
