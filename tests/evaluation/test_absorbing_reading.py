@@ -1,0 +1,56 @@
+"""benchmarks/absorbing_reading.py reads the protocol's targets from the shipped records."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import shutil
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+RECORDS = ROOT / "docs/reports/absorbing-evidence/runs"
+
+
+@pytest.fixture(scope="module")
+def reading():
+    spec = importlib.util.spec_from_file_location(
+        "absorbing_reading", ROOT / "benchmarks" / "absorbing_reading.py"
+    )
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # its dataclass looks its module up there
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_walker_seed5_reads_as_the_miss_the_protocol_page_reports(reading):
+    rows = {r.run: r for r in reading.readings(RECORDS)}
+    # runs without the option (the seeds beside them) are not read against a target
+    assert "walker_mcwae-seed3" not in rows
+    r = rows["walker_mcwae_absorbing-seed5"]
+    assert (r.task, r.seed, r.metric, r.target) == ("Walker2d-v5", 5, "qd_score", 9.6e5)
+    assert round(r.value, -3) == 810_000 and not r.hit
+    assert round(r.deployable, -3) == 717_000
+    assert r.scored_as_required and r.se_pct == pytest.approx(0.68, abs=0.01)
+    assert r.commit == "0177ac7"
+
+
+def test_a_hit_and_a_run_scored_otherwise(reading, tmp_path):
+    run = tmp_path / "walker_mcwae_absorbing-seed5"
+    shutil.copytree(RECORDS / run.name, run)
+    record = json.loads((run / "eval.json").read_text())
+    record["metrics"]["qd_score"] = 9.6e5  # at the target counts as reaching it
+    record["episodes_per_elite"] = 2
+    (run / "eval.json").write_text(json.dumps(record))
+    (r,) = reading.readings(tmp_path)
+    assert r.hit and not r.scored_as_required
+
+
+def test_a_run_not_rescored_is_named(reading, tmp_path):
+    run = tmp_path / "humanoid_gail_absorbing-seed1"
+    run.mkdir()
+    shutil.copy(RECORDS / "walker_mcwae_absorbing-seed5/config.yaml", run)
+    with pytest.raises(ValueError, match=r"humanoid_gail_absorbing-seed1: no eval\.json"):
+        reading.readings(tmp_path)
