@@ -51,14 +51,13 @@ class Reading:
         return self.episodes == EPISODES and self.se_pct < 100 * SE_RULE
 
 
-def absorbing(run_dir: Path) -> str | None:
-    """The run's ``reward.init_args.absorbing`` as its ``config.yaml`` records it."""
-    config = yaml.safe_load((run_dir / "config.yaml").read_text())
+def absorbing(config: dict) -> str | None:
+    """The run's ``reward.init_args.absorbing`` in its parsed ``config.yaml``."""
     return ((config.get("reward") or {}).get("init_args") or {}).get("absorbing")
 
 
-def read(run_dir: Path) -> Reading:
-    """Reads one run's ``eval.json`` against its task's target.
+def read(run_dir: Path, config: dict) -> Reading:
+    """Reads one run's ``eval.json`` (``config``: its parsed ``config.yaml``) against its target.
 
     Raises:
         ValueError: the run has no ``eval.json`` (not re-scored) or its task has no target.
@@ -74,7 +73,7 @@ def read(run_dir: Path) -> Reading:
     return Reading(
         run=run_dir.name,
         task=record["task"],
-        seed=int(yaml.safe_load((run_dir / "config.yaml").read_text())["seed"]),
+        seed=int(config["seed"]),
         metric=metric,
         target=target,
         value=float(metrics[metric]),
@@ -88,7 +87,8 @@ def read(run_dir: Path) -> Reading:
 def readings(records: Path = RECORDS) -> list[Reading]:
     """Every run under ``records`` that turns absorbing states on, in name order."""
     runs = sorted(p for p in records.iterdir() if (p / "config.yaml").is_file())
-    return [read(run) for run in runs if absorbing(run)]
+    configs = {run: yaml.safe_load((run / "config.yaml").read_text()) for run in runs}
+    return [read(run, config) for run, config in configs.items() if absorbing(config)]
 
 
 def main(argv: list[str] | None = None) -> None:
