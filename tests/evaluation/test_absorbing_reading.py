@@ -37,6 +37,19 @@ def test_walker_seed5_reads_as_the_miss_the_protocol_page_reports(reading):
     assert r.commit == "0177ac7"
 
 
+def test_humanoid_seed1_reads_as_the_protocol_page_reports(reading):
+    rows = {r.run: r for r in reading.readings(RECORDS)}
+    gail, wqdil = rows["humanoid_gail_absorbing-seed1"], rows["humanoid_mcwae_absorbing-seed1"]
+    for r in (gail, wqdil):
+        assert (r.task, r.seed, r.metric, r.target) == ("Humanoid-v5", 1, "obj_max", 3000)
+        assert r.commit == "0177ac7"
+    assert round(gail.value) == 5818 and gail.hit
+    # GAIL's standard error (1.28 %) is above the 1 % rule; WQDIL's (0.51 %) is under it
+    assert not gail.scored_as_required and wqdil.scored_as_required
+    assert round(wqdil.value) == 1525 and not wqdil.hit
+    assert round(wqdil.deployable) == 1525
+
+
 def test_a_hit_and_a_run_scored_otherwise(reading, tmp_path):
     run = tmp_path / "walker_mcwae_absorbing-seed5"
     shutil.copytree(RECORDS / run.name, run)
