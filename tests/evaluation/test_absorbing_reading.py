@@ -43,11 +43,12 @@ def test_humanoid_seed1_reads_as_the_protocol_page_reports(reading):
     for r in (gail, wqdil):
         assert (r.task, r.seed, r.metric, r.target) == ("Humanoid-v5", 1, "obj_max", 3000)
         assert r.commit == "0177ac7"
-    assert round(gail.value) == 5818 and gail.hit
-    # GAIL's standard error (1.28 %) is above the 1 % rule; WQDIL's (0.51 %) is under it
-    assert not gail.scored_as_required and wqdil.scored_as_required
-    assert round(wqdil.value) == 1525 and not wqdil.hit
-    assert round(wqdil.deployable) == 1525
+    assert round(gail.value) == 5777 and gail.hit
+    # both on 10 episodes per elite, the standard errors 0.91 % and 0.38 %
+    assert gail.scored_as_required and wqdil.scored_as_required
+    assert (gail.episodes, wqdil.episodes) == (10, 10)
+    assert round(wqdil.value) == 1310 and not wqdil.hit
+    assert round(wqdil.deployable) == 1310
 
 
 def test_a_hit_and_a_run_scored_otherwise(reading, tmp_path):
@@ -61,9 +62,22 @@ def test_a_hit_and_a_run_scored_otherwise(reading, tmp_path):
     assert r.hit and not r.scored_as_required
 
 
+def test_humanoid_is_scored_on_10_episodes_once_the_rule_fired(reading, tmp_path):
+    run = tmp_path / "humanoid_mcwae_absorbing-seed1"
+    shutil.copytree(RECORDS / run.name, run)
+    record = json.loads((run / "eval.json").read_text())
+    record["qd_score_se"] = 0.005 * record["metrics"]["qd_score"]  # under 1 % either way
+    for episodes, required in ((5, False), (10, True)):
+        record["episodes_per_elite"] = episodes
+        (run / "eval.json").write_text(json.dumps(record))
+        (r,) = reading.readings(tmp_path)
+        assert r.scored_as_required is required
+
+
 def test_a_run_not_rescored_is_named(reading, tmp_path):
     run = tmp_path / "humanoid_gail_absorbing-seed1"
     run.mkdir()
     shutil.copy(RECORDS / "walker_mcwae_absorbing-seed5/config.yaml", run)
-    with pytest.raises(ValueError, match=r"humanoid_gail_absorbing-seed1: no eval\.json"):
+    named = r"humanoid_gail_absorbing-seed1: no eval\.json; re-score it: .*10 on Humanoid-v5"
+    with pytest.raises(ValueError, match=named):
         reading.readings(tmp_path)
