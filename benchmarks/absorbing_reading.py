@@ -10,8 +10,8 @@ task's episodes per elite, the QD-Score's standard error under 1 %).
 
 from __future__ import annotations
 
+import argparse
 import json
-import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -96,8 +96,17 @@ def readings(records: Path = RECORDS) -> list[Reading]:
 
 
 def main(argv: list[str] | None = None) -> None:
-    args = sys.argv[1:] if argv is None else argv
-    records = Path(args[0]) if args else RECORDS
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument(
+        "records",
+        nargs="?",
+        type=Path,
+        default=RECORDS,
+        help="folder of run records, one per sub-folder (default: %(default)s)",
+    )
+    records = parser.parse_args(argv).records
+    if not records.is_dir():
+        parser.error(f"RECORDS {records} is not a folder of run records")
     print(
         "| run | seed | target | true-keyed | reading | deployable | episodes | SE of QD-Score "
         "| commit |"

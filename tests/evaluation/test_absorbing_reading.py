@@ -51,6 +51,31 @@ def test_humanoid_seed1_reads_as_the_protocol_page_reports(reading):
     assert round(wqdil.deployable) == 1310
 
 
+def test_second_seeds_read_as_the_protocol_page_reports(reading):
+    rows = {r.run: r for r in reading.readings(RECORDS)}
+    gail, walker = rows["humanoid_gail_absorbing-seed2"], rows["walker_mcwae_absorbing-seed6"]
+    assert (gail.task, gail.seed, gail.episodes) == ("Humanoid-v5", 2, 10)
+    assert round(gail.value) == 5818 and gail.hit
+    assert round(gail.deployable) == 5729
+    assert gail.se_pct == pytest.approx(0.59, abs=0.01)
+    assert (walker.task, walker.seed, walker.episodes) == ("Walker2d-v5", 6, 5)
+    assert round(walker.value, -3) == 884_000 and not walker.hit
+    assert round(walker.deployable, -3) == 784_000
+    assert walker.se_pct == pytest.approx(0.48, abs=0.01)
+    for r in (gail, walker):
+        assert r.scored_as_required and r.commit == "0177ac7"
+
+
+def test_help_and_a_missing_folder(reading, capsys):
+    with pytest.raises(SystemExit) as exit_:
+        reading.main(["--help"])
+    assert exit_.value.code == 0 and "RECORDS" in capsys.readouterr().out.upper()
+    with pytest.raises(SystemExit) as exit_:
+        reading.main(["/no/such/records"])
+    assert exit_.value.code == 2
+    assert "/no/such/records is not a folder of run records" in capsys.readouterr().err
+
+
 def test_a_hit_and_a_run_scored_otherwise(reading, tmp_path):
     run = tmp_path / "walker_mcwae_absorbing-seed5"
     shutil.copytree(RECORDS / run.name, run)
