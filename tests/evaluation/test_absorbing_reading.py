@@ -62,7 +62,9 @@ def test_second_seeds_read_as_the_protocol_page_reports(reading):
     assert round(walker.value, -3) == 884_000 and not walker.hit
     assert round(walker.deployable, -3) == 784_000
     assert walker.se_pct == pytest.approx(0.48, abs=0.01)
-    for r in (gail, walker):
+    wqdil = rows["humanoid_mcwae_absorbing-seed2"]
+    assert round(wqdil.value) == 716 and not wqdil.hit and wqdil.episodes == 10
+    for r in (gail, walker, wqdil):
         assert r.scored_as_required and r.commit == "0177ac7"
 
 
