@@ -6,15 +6,23 @@ states on, and prints one row per run: its target (Humanoid: the true-keyed arch
 corrected elite at least 3,000; Walker2d: its corrected QD-Score at least 9.6e5), the figure,
 hit or miss, the deployable archive beside it, and the scoring the protocol requires (its
 task's episodes per elite, the QD-Score's standard error under 1 %).
+
+``--training`` prints instead what each run's ``metrics.csv`` shows about why: the floor's
+price of a step after a fall against a step alive (docs/concepts/survival.md), the
+iterations whose 20 steps before a fall were paid more than the others, falls, the best
+training elite and the critic's gap, the figures the protocol page's readings quote.
 """
 
 from __future__ import annotations
 
 import argparse
+import csv
 import json
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 import yaml
 
 RECORDS = Path(__file__).resolve().parents[1] / "docs/reports/absorbing-evidence/runs"
@@ -88,11 +96,130 @@ def read(run_dir: Path, config: dict) -> Reading:
     )
 
 
-def readings(records: Path = RECORDS) -> list[Reading]:
-    """Every run under ``records`` that turns absorbing states on, in name order."""
+def absorbing_runs(records: Path) -> dict[Path, dict]:
+    """Run folder -> parsed ``config.yaml`` of every run under ``records`` with the option on."""
     runs = sorted(p for p in records.iterdir() if (p / "config.yaml").is_file())
     configs = {run: yaml.safe_load((run / "config.yaml").read_text()) for run in runs}
-    return [read(run, config) for run, config in configs.items() if absorbing(config)]
+    return {run: config for run, config in configs.items() if absorbing(config)}
+
+
+def readings(records: Path = RECORDS) -> list[Reading]:
+    """Every run under ``records`` that turns absorbing states on, in name order."""
+    return [read(run, config) for run, config in absorbing_runs(records).items()]
+
+
+# iterations at which falls, the best training elite and the critic's gap are quoted
+MARKS = (10, 20, 50, 70, 100, 120)
+
+
+@dataclass(frozen=True)
+class Training:
+    """What one run's ``metrics.csv`` shows about staying up, from iteration ``since`` on.
+
+    Prices are per step: ``floor`` is ``reward/absorbing`` (a step after a fall), ``alive``
+    is ``survival/reward_alive`` (a step not among the last 20 before a fall), ``policy``
+    is ``reward/train_per_step`` (every step of the training rollouts, bonus included).
+    """
+
+    run: str
+    since: int
+    last: int
+    floor: tuple[float, float, float, float, float]  # median, 10th, 90th percentile, min, max
+    alive: float  # median
+    policy: float  # median
+    gap: tuple[float, float]  # smallest and largest alive − floor of one iteration
+    paid_more: tuple[int, ...]  # iterations whose steps before a fall paid more than alive
+    falls: dict[int, float]  # falls per 1,000 steps at the MARKS the run reached
+    best: dict[int, float]  # best training elite (qd/obj_max) at the MARKS
+    best_from: int  # the iteration the run's final best was first reached
+    critic_gap: dict[int, float]  # reward/critic_gap at the MARKS (empty for GAIL)
+
+
+def training(run_dir: Path, since: int = 2) -> Training:
+    """Reads ``run_dir``'s ``metrics.csv`` (one row per iteration) from iteration ``since``.
+
+    Raises:
+        ValueError: no ``metrics.csv``, or no row from ``since`` on.
+    """
+    path = run_dir / "metrics.csv"
+    if not path.is_file():
+        raise ValueError(f"{run_dir}: no metrics.csv; is it a run folder of qdil fit?")
+    with path.open() as f:
+        rows = {int(r["iteration"]): r for r in csv.DictReader(f)}
+    iterations = [i for i in sorted(rows) if i >= since]
+    if not iterations:
+        raise ValueError(f"{path}: no iteration from {since} on (last {max(rows)})")
+
+    def column(key: str, its: list[int] = iterations) -> np.ndarray:
+        return np.array([float(rows[i].get(key) or "nan") for i in its])
+
+    def at_marks(key: str) -> dict[int, float]:
+        values = {m: float(rows[m].get(key) or "nan") for m in MARKS if m in rows}
+        return {m: v for m, v in values.items() if not math.isnan(v)}
+
+    floor, alive = column("reward/absorbing"), column("survival/reward_alive")
+    before = column("survival/reward_before_fall")
+    best = column("qd/obj_max", sorted(rows))
+    return Training(
+        run=run_dir.name,
+        since=since,
+        last=iterations[-1],
+        floor=tuple(float(v) for v in np.percentile(floor, [50, 10, 90, 0, 100])),
+        alive=float(np.median(alive)),
+        policy=float(np.median(column("reward/train_per_step"))),
+        gap=(float((alive - floor).min()), float((alive - floor).max())),
+        # NaN (nothing fell) compares False: such an iteration paid nothing more
+        paid_more=tuple(i for i, b, a in zip(iterations, before, alive, strict=True) if b > a),
+        falls=at_marks("survival/falls_per_1k_steps"),
+        best=at_marks("qd/obj_max"),
+        best_from=sorted(rows)[int(np.argmax(best >= best.max()))],
+        critic_gap=at_marks("reward/critic_gap"),
+    )
+
+
+def spans(iterations: list[int]) -> str:
+    """``[1, 2, 3, 7]`` as ``1–3, 7``."""
+    runs: list[list[int]] = []
+    for i in iterations:
+        if runs and i == runs[-1][-1] + 1:
+            runs[-1].append(i)
+        else:
+            runs.append([i])
+    return ", ".join(f"{r[0]}–{r[-1]}" if len(r) > 1 else f"{r[0]}" for r in runs)
+
+
+def paid_more_cell(t: Training) -> str:
+    """How many iterations paid more before a fall, naming the fewer side's iterations."""
+    every = range(t.since, t.last + 1)
+    more = set(t.paid_more)
+    if len(more) * 2 > len(every):
+        others = [i for i in every if i not in more]
+        named = f" (not {spans(others)})" if others else ""
+    else:
+        named = f" ({spans(sorted(more))})" if more else ""
+    return f"{len(more)} of {len(every)}{named}"
+
+
+def print_training(records: Path, since: int) -> None:
+    """One row per absorbing run: the figures of :class:`Training`."""
+    print(f"training records from iteration {since} on; prices per step\n")
+    print(
+        "| run | floor median [p10, p90] (min to max) | alive median | policy median "
+        "| alive − floor "
+        "| paid more before a fall | falls per 1k | best training elite | critic gap |"
+    )
+    print("|---|---|---|---|---|---|---|---|---|")
+    for run in absorbing_runs(records):
+        t = training(run, since)
+        marks = lambda d, f: ", ".join(f"{m}: {f(v)}" for m, v in d.items())  # noqa: E731
+        print(
+            f"| {t.run} | {t.floor[0]:.2f} [{t.floor[1]:.2f}, {t.floor[2]:.2f}] "
+            f"({t.floor[3]:.2f} to {t.floor[4]:.2f}) | {t.alive:.2f} | {t.policy:.2f} "
+            f"| {t.gap[0]:.2f} to {t.gap[1]:.2f} | {paid_more_cell(t)} "
+            f"| {marks(t.falls, lambda v: f'{v:.1f}' if v >= 1 else f'{v:.2f}')} "
+            f"| {marks(t.best, lambda v: f'{v:,.0f}')} (final from {t.best_from}) "
+            f"| {marks(t.critic_gap, lambda v: f'{v:.1f}') or '–'} |"
+        )
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -104,9 +231,25 @@ def main(argv: list[str] | None = None) -> None:
         default=RECORDS,
         help="folder of run records, one per sub-folder (default: %(default)s)",
     )
-    records = parser.parse_args(argv).records
+    parser.add_argument(
+        "--training",
+        action="store_true",
+        help="print what each run's metrics.csv shows about staying up instead of the targets",
+    )
+    parser.add_argument(
+        "--since",
+        type=int,
+        default=2,
+        help="first iteration the training figures cover (default: %(default)s; the floor "
+        "is priced from iteration 2 on)",
+    )
+    args = parser.parse_args(argv)
+    records = args.records
     if not records.is_dir():
         parser.error(f"RECORDS {records} is not a folder of run records")
+    if args.training:
+        print_training(records, args.since)
+        return
     print(
         "| run | seed | target | true-keyed | reading | deployable | episodes | SE of QD-Score "
         "| commit |"

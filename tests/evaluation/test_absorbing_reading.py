@@ -108,3 +108,43 @@ def test_a_run_not_rescored_is_named(reading, tmp_path):
     named = r"humanoid_gail_absorbing-seed1: no eval\.json; re-score it: .*10 on Humanoid-v5"
     with pytest.raises(ValueError, match=named):
         reading.readings(tmp_path)
+
+
+def test_training_figures_read_as_the_protocol_page_quotes(reading):
+    wqdil = reading.training(RECORDS / "humanoid_mcwae_absorbing-seed2")
+    assert (wqdil.since, wqdil.last) == (2, 100)
+    assert wqdil.floor[0] == pytest.approx(-2.30, abs=0.005)
+    assert wqdil.alive == pytest.approx(0.22, abs=0.005)
+    # the steps before a fall paid more in all but 16 iterations, all of them in 38-65
+    assert len(wqdil.paid_more) == 83
+    assert {i for i in range(2, 101) if i not in wqdil.paid_more} <= set(range(38, 66))
+    assert round(wqdil.falls[100], 1) == 6.1 and round(wqdil.critic_gap[100], 1) == 22.1
+    assert round(wqdil.best[100]) == 864 and wqdil.best_from == 56
+    gail = reading.training(RECORDS / "humanoid_gail_absorbing-seed2")
+    assert gail.paid_more == tuple(range(2, 10)) and gail.critic_gap == {}
+    assert gail.best_from == 86 and gail.gap[0] > 3  # the floor always well below a step alive
+    walker = reading.training(RECORDS / "walker_mcwae_absorbing-seed5", since=11)
+    assert walker.floor[:3] == pytest.approx((-3.69, -5.08, -2.40), abs=0.005)
+    assert walker.policy == pytest.approx(0.38, abs=0.005)
+
+
+def test_training_reading_of_a_run_without_falls_and_bad_input(reading, tmp_path, capsys):
+    run = tmp_path / "humanoid_gail_absorbing-seed1"
+    shutil.copytree(RECORDS / run.name, run)
+    lines = (run / "metrics.csv").read_text().splitlines()
+    header = lines[0].split(",")
+    before = header.index("survival/reward_before_fall")
+    rows = [line.split(",") for line in lines[1:]]
+    for row in rows:
+        row[before] = ""  # nothing fell: the iteration paid nothing more before a fall
+    (run / "metrics.csv").write_text("\n".join([lines[0]] + [",".join(r) for r in rows]))
+    assert reading.training(run).paid_more == ()
+    reading.main([str(tmp_path), "--training"])
+    out = capsys.readouterr().out
+    assert "| humanoid_gail_absorbing-seed1 |" in out and "| 0 of 99 |" in out
+    with pytest.raises(ValueError, match="no iteration from 500 on"):
+        reading.training(run, since=500)
+    (run / "metrics.csv").unlink()
+    with pytest.raises(ValueError, match=r"humanoid_gail_absorbing-seed1: no metrics\.csv"):
+        reading.training(run)
+    assert reading.spans([1, 2, 3, 7, 9, 10]) == "1–3, 7, 9–10"
