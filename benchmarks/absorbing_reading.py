@@ -16,7 +16,6 @@ training elite and the critic's gap, the figures the protocol page's readings qu
 from __future__ import annotations
 
 import argparse
-import csv
 import json
 import math
 from dataclasses import dataclass
@@ -24,6 +23,8 @@ from pathlib import Path
 
 import numpy as np
 import yaml
+
+from qdil.evaluation.runs import read_curves
 
 RECORDS = Path(__file__).resolve().parents[1] / "docs/reports/absorbing-evidence/runs"
 # episodes per elite per task: 5, and 10 on Humanoid once the 1 % rule fired on its first run
@@ -144,22 +145,25 @@ def training(run_dir: Path, since: int = 2) -> Training:
     path = run_dir / "metrics.csv"
     if not path.is_file():
         raise ValueError(f"{run_dir}: no metrics.csv; is it a run folder of qdil fit?")
-    with path.open() as f:
-        rows = {int(r["iteration"]): r for r in csv.DictReader(f)}
-    iterations = [i for i in sorted(rows) if i >= since]
-    if not iterations:
-        raise ValueError(f"{path}: no iteration from {since} on (last {max(rows)})")
+    curves = read_curves(path)
+    steps, best = curves["qd/obj_max"]
+    if not (steps >= since).any():
+        raise ValueError(f"{path}: no iteration from {since} on (last {steps.max()})")
+    kept = steps >= since
+    iterations = [int(i) for i in steps[kept]]
 
-    def column(key: str, its: list[int] = iterations) -> np.ndarray:
-        return np.array([float(rows[i].get(key) or "nan") for i in its])
+    def values(key: str) -> np.ndarray:  # (T,) over every iteration, NaN where not logged
+        return curves[key][1] if key in curves else np.full(len(steps), np.nan)
+
+    def column(key: str) -> np.ndarray:
+        return values(key)[kept]
 
     def at_marks(key: str) -> dict[int, float]:
-        values = {m: float(rows[m].get(key) or "nan") for m in MARKS if m in rows}
-        return {m: v for m, v in values.items() if not math.isnan(v)}
+        marked = {m: float(values(key)[steps == m][0]) for m in MARKS if m in steps}
+        return {m: v for m, v in marked.items() if not math.isnan(v)}
 
     floor, alive = column("reward/absorbing"), column("survival/reward_alive")
     before = column("survival/reward_before_fall")
-    best = column("qd/obj_max", sorted(rows))
     return Training(
         run=run_dir.name,
         since=since,
@@ -172,7 +176,7 @@ def training(run_dir: Path, since: int = 2) -> Training:
         paid_more=tuple(i for i, b, a in zip(iterations, before, alive, strict=True) if b > a),
         falls=at_marks("survival/falls_per_1k_steps"),
         best=at_marks("qd/obj_max"),
-        best_from=sorted(rows)[int(np.argmax(best >= best.max()))],
+        best_from=int(steps[np.argmax(best >= best.max())]),
         critic_gap=at_marks("reward/critic_gap"),
     )
 
