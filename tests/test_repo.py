@@ -26,9 +26,16 @@ def test_readme_has_exactly_two_setup_commands() -> None:
 
 
 def test_ci_runs_the_readme_test_command() -> None:
+    """Every step of the README's test command after the venv, in order, each on a line of
+    ``.ci/run`` of its own or joined as the README joins them (CI times install and tests
+    apart)."""
     test_command = readme_commands()[1]
-    install_and_test = test_command.split(". .venv/bin/activate && ", 1)[1]
-    assert install_and_test in (ROOT / ".ci" / "run").read_text()
+    steps = test_command.split(". .venv/bin/activate && ", 1)[1].split(" && ")
+    lines = [line.strip() for line in (ROOT / ".ci" / "run").read_text().splitlines()]
+    ran = [step for line in lines if not line.startswith("#") for step in line.split(" && ")]
+    at = [ran.index(step) if step in ran else -1 for step in steps]
+    assert -1 not in at, f"{steps[at.index(-1)]!r} is not a command of .ci/run"
+    assert at == sorted(at), f".ci/run runs {steps} in another order"
 
 
 def test_report_records_are_not_ignored_by_git() -> None:

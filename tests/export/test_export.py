@@ -16,9 +16,9 @@ import torch
 from qdil.cli import main
 from qdil.evaluation.rescore import ReplaySettings
 from qdil.qd.checkpoint import load_archive
-from qdil.qd.loop import stats_from_fields
 from qdil.rl.collect import ActionMap
 from qdil.rl.networks import VectorizedActor
+from qdil.rl.normalize import stats_from_fields
 from qdil.rl.sampler import act
 from tests.commands import SMOKE
 

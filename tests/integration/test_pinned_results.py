@@ -59,9 +59,7 @@ def fingerprint() -> str:
 
 PINS: dict[str, dict[str, str]] = {
     # recorded on 2026-11-28 after policy inference on the CPU began to compute every row alone
-    # (qdil.rl.inference, issue 46), which changed every rollout's last bits. Intel Xeon
-    # (AVX-512, MKL AVX512_E1,STRICT): pending, to be recorded on such a machine with
-    # QDIL_PRINT_PINS=1; its pins of before that change no longer hold.
+    # (qdil.rl.inference), which changed every rollout's last bits
     "x86_64/AMD EPYC/AVX512/MKL AUTO,STRICT/torch 2.13.0+cpu/numpy 2.4.6/mujoco 4.0.0": {
         "training_rollouts": "39d7f39735152ddf57809a13f71117be3c298b44e6a76dab6d9e8580f70121f7",
         "evaluation_False": "417d0818551ec0618db22a644c0f065ee3a4bacd1ccfaa639fe0c5b3abefa28d",
@@ -69,6 +67,18 @@ PINS: dict[str, dict[str, str]] = {
         "vppo_phases": "1746a8ff4d57411b2a780747d7478eeeb51fcfaa098d854c2879ad518ae9a857",
         "fit_true": "609999ff97bc06b970714a72464bf069224242e3b9adbc68901f9af7f4914677",
         "fit_wqdil": "e5f5e71bad998b0b6386abf7eedf52928cba2ecc7549013717218e84a2e2942a",
+    },
+    # recorded on 2026-12-03 with QDIL_PRINT_PINS=1 from a clean checkout of baee481 (whose
+    # AMD pins passed in its CI) on a 2-vCPU Intel Xeon (Sapphire Rapids): rollouts and
+    # evaluations have the AMD bits; VPPO's phases and the fits round differently in MKL
+    "x86_64/Intel(R) Xeon(R) Processor/AVX512/MKL AVX512_E1,STRICT/torch 2.13.0+cpu/"
+    "numpy 2.4.6/mujoco 4.0.1": {
+        "training_rollouts": "39d7f39735152ddf57809a13f71117be3c298b44e6a76dab6d9e8580f70121f7",
+        "evaluation_False": "417d0818551ec0618db22a644c0f065ee3a4bacd1ccfaa639fe0c5b3abefa28d",
+        "evaluation_True": "b2a335ed213c3599240facb0c1de1d20a5f5ef36cd3ed7d365558db25a312874",
+        "vppo_phases": "403c627c2aed7a03a05bf260a7ac39070b159196100bce9eb6a11b168b0003f3",
+        "fit_true": "538e1e92045efbbb1941b406fc61a158aa59a6bfb84cfe2a75ad1aa4fe0ab2c0",
+        "fit_wqdil": "2e2b23cf0d13b75b49b4fbaf3e90d248c563131ce84863054fe7d9bf9024f138",
     },
 }
 

@@ -76,8 +76,14 @@ def main(argv: list[str] | None = None) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("command", choices=sorted(COMMANDS), help="what to do")
+    parser.add_argument("-V", "--version", action="store_true", help="print qdil's version")
     if not argv or argv[0] in ("-h", "--help"):
         parser.print_help()
+        return
+    if argv[0] in ("-V", "--version"):
+        from qdil import __version__
+
+        print(f"qdil {__version__}")
         return
     command, rest = argv[0], argv[1:]
     if command not in COMMANDS:

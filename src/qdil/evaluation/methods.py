@@ -33,6 +33,11 @@ def reward_name(config: Mapping[str, Any]) -> str:
     class_path = reward.get("class_path", "") if isinstance(reward, Mapping) else str(reward)
     if "." not in class_path:
         return class_path
+    from qdil.rewards.names import declared_name
+
+    declared = declared_name(class_path)  # read from the source: no Lightning to import
+    if declared is not None:
+        return declared
     from qdil.rewards import discover
 
     discover()

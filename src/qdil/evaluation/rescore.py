@@ -22,10 +22,9 @@ from qdil.files import CONFIG_NAME, atomic_write
 from qdil.provenance import provenance
 from qdil.qd.archives import QD_OFFSETS, elite_fields, make_grid, qd_metrics, true_keyed
 from qdil.qd.checkpoint import dumps_compact, load_archive, load_archives
-from qdil.qd.loop import stats_from_fields
 from qdil.rl.episodes import evaluate_policies
 from qdil.rl.networks import VectorizedActor
-from qdil.rl.normalize import RunningMeanStd
+from qdil.rl.normalize import RunningMeanStd, stats_from_fields
 from qdil.upgrades import policy_settings
 
 CORRECTED = "corrected_archive.pkl"

@@ -21,7 +21,7 @@ from qdil.evaluation.elites import select_rows
 from qdil.evaluation.rescore import ReplaySettings
 from qdil.provenance import git_state
 from qdil.qd.checkpoint import load_archive
-from qdil.qd.loop import stats_from_fields
+from qdil.rl.normalize import stats_from_fields
 
 
 def export_dataset(

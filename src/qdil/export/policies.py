@@ -22,7 +22,7 @@ from qdil.export.policy import GaitPolicy
 from qdil.files import atomic_write
 from qdil.provenance import PROVENANCE_JSON, git_state
 from qdil.qd.checkpoint import load_archive
-from qdil.qd.loop import stats_from_fields
+from qdil.rl.normalize import stats_from_fields
 
 
 @dataclass(frozen=True)

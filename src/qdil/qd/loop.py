@@ -43,29 +43,10 @@ from qdil.qd.survival import SurvivalTally
 from qdil.qd.vppo import walk_rewards
 from qdil.reductions import sum_over
 from qdil.rl.episodes import Evaluation
-from qdil.rl.normalize import RunningMeanStd
+from qdil.rl.normalize import RunningMeanStd, fields_from_stats, stats_from_fields
 
 if TYPE_CHECKING:
     from qdil.qd.state import Run
-
-
-def stats_from_fields(fields: dict[str, np.ndarray]) -> RunningMeanStd:
-    """Observation statistics of P policies from their archive fields (P, ...) or (...)."""
-    stats = RunningMeanStd.__new__(RunningMeanStd)
-    stats.mean = torch.as_tensor(np.atleast_2d(fields["obs_mean"]), dtype=torch.float64)
-    stats.var = torch.as_tensor(np.atleast_2d(fields["obs_var"]), dtype=torch.float64)
-    stats.count = torch.as_tensor(np.atleast_1d(fields["obs_count"]), dtype=torch.float64)
-    return stats
-
-
-def fields_from_stats(stats: RunningMeanStd, lengths: np.ndarray) -> dict[str, np.ndarray]:
-    """Archive fields (P, ...) of P policies: their statistics and episode lengths."""
-    return {
-        "obs_mean": stats.mean.cpu().numpy().copy(),  # pyribs keeps them on the host
-        "obs_var": stats.var.cpu().numpy().copy(),
-        "obs_count": stats.count.cpu().numpy().copy(),
-        "length": np.asarray(lengths, dtype=np.float64),
-    }
 
 
 @contextmanager

@@ -8,6 +8,7 @@ mean starts at 0, the variance at 1, the count at a tiny epsilon, in float64.
 
 from __future__ import annotations
 
+import numpy as np
 import torch
 
 from qdil.reductions import mean_over, var_over
@@ -124,3 +125,22 @@ class RunningMeanStd:
         out.var = torch.cat([s.var for s in stats])
         out.count = torch.cat([s.count for s in stats])
         return out
+
+
+def stats_from_fields(fields: dict[str, np.ndarray]) -> RunningMeanStd:
+    """Observation statistics of P policies from their archive fields (P, ...) or (...)."""
+    stats = RunningMeanStd.__new__(RunningMeanStd)
+    stats.mean = torch.as_tensor(np.atleast_2d(fields["obs_mean"]), dtype=torch.float64)
+    stats.var = torch.as_tensor(np.atleast_2d(fields["obs_var"]), dtype=torch.float64)
+    stats.count = torch.as_tensor(np.atleast_1d(fields["obs_count"]), dtype=torch.float64)
+    return stats
+
+
+def fields_from_stats(stats: RunningMeanStd, lengths: np.ndarray) -> dict[str, np.ndarray]:
+    """Archive fields (P, ...) of P policies: their statistics and episode lengths."""
+    return {
+        "obs_mean": stats.mean.cpu().numpy().copy(),  # pyribs keeps them on the host
+        "obs_var": stats.var.cpu().numpy().copy(),
+        "obs_count": stats.count.cpu().numpy().copy(),
+        "length": np.asarray(lengths, dtype=np.float64),
+    }

@@ -1,0 +1,76 @@
+"""Light commands start light: which packages each loads in a process of its own.
+
+Lightning, pyribs and torch cost a ``qdil`` process seconds of imports before it does
+anything (docs/testing.md). Commands that train nothing must not pay for them: the test
+reads the modules a fresh process has loaded after the command, not its time.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from qdil.cli import COMMANDS, main
+from tests.commands import SMOKE, user_env
+
+HEAVY = ("torch", "lightning", "ribs", "wandb", "ray", "sklearn", "pandas", "matplotlib")
+"""Packages that each cost a process a second or more to import."""
+
+DRIVER = r"""
+import json, sys
+from qdil.cli import main
+for args in json.loads(sys.argv[1]):
+    try:
+        main(args)
+    except SystemExit:
+        pass
+print("\nLOADED " + json.dumps(sorted({name.split(".")[0] for name in sys.modules})))
+"""
+
+
+def loaded(commands: list[list[str]], cwd: Path) -> set[str]:
+    """Top-level packages a fresh process holds after running ``qdil`` with each argument list."""
+    done = subprocess.run(
+        [sys.executable, "-c", DRIVER, json.dumps(commands)],
+        cwd=cwd,
+        env=user_env(),
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=True,
+    )
+    return set(json.loads(done.stdout.rpartition("\nLOADED ")[2]))
+
+
+def test_help_and_version_load_none_of_the_heavy_packages(tmp_path: Path) -> None:
+    light = [["--help"], ["--version"]] + [[c, "--help"] for c in sorted(COMMANDS) if c != "fit"]
+    assert loaded(light, tmp_path).isdisjoint(HEAVY)
+
+
+def test_version_prints_the_package_version(capsys) -> None:
+    from qdil import __version__
+
+    main(["--version"])
+    assert capsys.readouterr().out == f"qdil {__version__}\n"
+
+
+@pytest.fixture(scope="module")
+def finished(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A finished one-iteration smoke run, trained in this process (its folder's parent)."""
+    root = tmp_path_factory.mktemp("light")
+    with pytest.MonkeyPatch.context() as patch:
+        patch.chdir(root)
+        patch.delenv("QDIL_PLUGIN_PATH", raising=False)
+        main(["fit", str(SMOKE), "--qd.iterations", "1", "--name", "done"])
+    return root
+
+
+def test_a_report_of_finished_runs_loads_no_lightning_wandb_or_ray(finished: Path) -> None:
+    """It reads records and renders elites (torch and pyribs), never a reward model."""
+    modules = loaded([["report", "runs/done", "--out", "report", "--videos", "1"]], finished)
+    assert (finished / "report" / "report.md").is_file()
+    assert modules.isdisjoint({"lightning", "wandb", "ray"}), modules & {"lightning", "wandb"}
