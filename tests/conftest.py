@@ -61,6 +61,9 @@ def rng() -> np.random.Generator:
     return np.random.default_rng(12345)
 
 
+SMOKE_RECIPE = Path(__file__).resolve().parents[1] / "recipes" / "smoke" / "walker_true.yaml"
+
+
 @pytest.fixture(scope="session")
 def walker_demos(tmp_path_factory: pytest.TempPathFactory):
     """A small Walker2d demonstration file the tests make themselves (two short episodes)."""
@@ -92,12 +95,34 @@ def gl() -> str:
         pytest.skip(f"no OpenGL backend renders here: {error}")
 
 
-@pytest.fixture(scope="module")
-def smoke_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A one-iteration run of the smoke recipe with a checkpoint, made by ``qdil fit`` in a
-    process of its own (no plugins, no W&B): its directory."""
-    root = tmp_path_factory.mktemp("smoke")
-    from tests.commands import SMOKE, qdil  # qdil imported after the variables above
+@pytest.fixture(scope="session")
+def _smoke_made(tmp_path_factory: pytest.TempPathFactory, worker_id: str) -> Path:
+    """The one-iteration smoke run, trained once per test session (in this process, by the
+    first worker to get here; the others wait for it and read the same folder)."""
+    from filelock import FileLock
 
-    qdil("fit", str(SMOKE), "--qd.iterations", "1", "--name", "tiny", cwd=root, check=True)
+    # xdist's workers share the parent of their base folders; a lone run has its own
+    shared = tmp_path_factory.getbasetemp()
+    shared = shared.parent if worker_id != "master" else shared
+    root = shared / "smoke-run"
+    with FileLock(str(shared / "smoke-run.lock")):
+        if not (root / "runs" / "tiny" / "config.yaml").is_file():
+            from qdil.cli import main
+
+            with pytest.MonkeyPatch.context() as patch:
+                root.mkdir(exist_ok=True)
+                patch.chdir(root)
+                patch.delenv("QDIL_PLUGIN_PATH", raising=False)
+                main(["fit", str(SMOKE_RECIPE), "--qd.iterations", "1", "--name", "tiny"])
     return root / "runs" / "tiny"
+
+
+@pytest.fixture(scope="module")
+def smoke_run(_smoke_made: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A one-iteration run of the smoke recipe with a checkpoint (no plugins, no W&B): a
+    copy of the session's, which the module may write into."""
+    import shutil
+
+    copy = tmp_path_factory.mktemp("smoke") / "runs" / "tiny"
+    shutil.copytree(_smoke_made, copy)
+    return copy

@@ -69,8 +69,18 @@ def finished(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return root
 
 
-def test_a_report_of_finished_runs_loads_no_lightning_wandb_or_ray(finished: Path) -> None:
-    """It reads records and renders elites (torch and pyribs), never a reward model."""
-    modules = loaded([["report", "runs/done", "--out", "report", "--videos", "1"]], finished)
-    assert (finished / "report" / "report.md").is_file()
+@pytest.mark.parametrize(
+    "command",
+    [
+        ["report", "runs/done", "--out", "report", "--videos", "1"],
+        ["eval", "runs/done", "--episodes", "1"],  # each sweep trial's re-scoring
+    ],
+    ids=["report", "eval"],
+)
+def test_reading_finished_runs_loads_no_lightning_wandb_or_ray(finished, command) -> None:
+    """Reports and re-scoring read records and play elites (torch and pyribs), never a reward
+    model."""
+    modules = loaded([command], finished)
+    assert (finished / "runs" / "done" / "eval.json").is_file() or command[0] != "eval"
+    assert (finished / "report" / "report.md").is_file() or command[0] != "report"
     assert modules.isdisjoint({"lightning", "wandb", "ray"}), modules & {"lightning", "wandb"}

@@ -2,7 +2,8 @@
 
 The docs' commands train for minutes to days. Under the switch (the docs test sets it unless
 it is given as 0), the test's shell runs ``qdil`` through this file, which appends :data:`TINY`
-to every new run, and to every trial of a ``qdil sweep`` (of a search: two trials): one QD
+to every new run, and to every trial of a ``qdil sweep`` (of a search: two trials; of a
+table: its first seed; of a spec: each stage's first seed and grid point): one QD
 iteration of a handful of simulations on 50-step episodes, the sizes of ``recipes/smoke/``.
 Overrides given later win in the recipe parser, so whatever iterations or sizes a command
 sets, the run stays tiny; everything else of the command (the recipe, the reward model and
@@ -19,6 +20,11 @@ from __future__ import annotations
 
 import os
 import sys
+from pathlib import Path
+
+import yaml
+
+from qdil.sweeps.spec import is_spec
 
 # recipes/smoke/walker_true.yaml's sizes (num_envs divisible by k + 1 for k = 1 and 2 feet),
 # ten cells per measure, one demonstration episode for the reward model's update, and no
@@ -91,10 +97,45 @@ def fitted(argv: list[str]) -> list[str]:
     return [*tiny, *(ES_PAIRS if "pairs" in options else [])]
 
 
+def first_seed(argv: list[str]) -> list[str]:
+    """``argv`` with only the first seed after ``--seeds`` (a sweep's table, one row)."""
+    if "--seeds" not in argv:
+        return argv
+    at = argv.index("--seeds") + 1
+    end = at
+    while end < len(argv) and not argv[end].startswith("-"):
+        end += 1
+    return [*argv[:at], *argv[at : at + 1], *argv[end:]]
+
+
+def one_point(spec: Path) -> Path:
+    """A copy of the sweep spec ``spec`` beside it with each stage's first seed and grid point.
+
+    The stages, recipes, overrides, demonstrations and reports run as written; a table of
+    seeds × grid points becomes one trial per recipe and stage.
+    """
+    content = yaml.safe_load(spec.read_text())
+    for stage in content.get("stages") or []:
+        if isinstance(stage, dict) and stage.get("seeds"):
+            stage["seeds"] = stage["seeds"][:1]
+        if isinstance(stage, dict) and isinstance(stage.get("grid"), dict):
+            stage["grid"] = {key: values[:1] for key, values in stage["grid"].items()}
+    short = spec.with_name(f".{spec.stem}.short.yaml")
+    short.write_text(yaml.safe_dump(content, sort_keys=False))
+    return short
+
+
 def shortened(argv: list[str]) -> list[str]:
-    """The ``qdil`` arguments ``argv`` with a tiny run's overrides appended to a fit or sweep."""
+    """The ``qdil`` arguments ``argv`` with a tiny run's overrides appended to a fit or sweep.
+
+    A sweep runs one seed of its ``--seeds`` (a spec: each stage's first seed and grid
+    point), each trial a tiny run.
+    """
     if argv and argv[0] == "sweep" and not NOTHING_RUNS.intersection(argv):
         searched = ["--samples", "2"] if "--search" in argv else []  # two tiny trials
+        argv = first_seed(argv)
+        if len(argv) > 1 and not argv[1].startswith("-") and is_spec(Path(argv[1])):
+            argv = [argv[0], str(one_point(Path(argv[1]))), *argv[2:]]
         return [*argv, *TINY, *searched]  # every trial a tiny run (overrides reach each)
     if not argv or argv[0] != "fit" or NOTHING_RUNS.intersection(argv):
         return argv

@@ -71,3 +71,26 @@ def test_an_estimator_gets_the_options_it_has_and_none_without_one() -> None:
 
         config, _, _ = parse_fit(short[1:])
         assert config.qd.iterations == 1
+
+
+def test_a_sweep_runs_its_first_seed_each_trial_tiny() -> None:
+    argv = ["sweep", "a.yaml", "b.yaml", "--seeds", "0", "1", "2", "--report", "out/"]
+    assert shortened(argv) == ["sweep", "a.yaml", "b.yaml", "--seeds", "0", "--report", "out/",
+                               *TINY]  # fmt: skip
+
+
+def test_a_spec_runs_each_stage_at_its_first_seed_and_grid_point(tmp_path: Path) -> None:
+    import yaml
+
+    spec = tmp_path / "table.yaml"
+    stages = [
+        {"name": "expert", "recipes": ["r.yaml"], "seeds": [0], "demos": {"out": "e.npz"}},
+        {"name": "imitate", "recipes": ["s.yaml"], "seeds": [0, 1], "grid": {"a.b": [1, 2]}},
+    ]
+    spec.write_text(yaml.safe_dump({"name": "t", "stages": stages}))
+    argv = shortened(["sweep", str(spec)])
+    short = yaml.safe_load(Path(argv[1]).read_text())
+    assert argv[2:] == TINY and short["name"] == "t"
+    assert short["stages"][0] == stages[0]  # nothing to cut
+    assert short["stages"][1] == {**stages[1], "seeds": [0], "grid": {"a.b": [1]}}
+    assert yaml.safe_load(spec.read_text())["stages"] == stages  # the reader's file unchanged

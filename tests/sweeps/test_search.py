@@ -21,7 +21,7 @@ import ray
 from qdil.cli import main
 from qdil.sweeps.search import Domain, RescoredOptunaSearch, Search, parse_domain
 from tests.cli.test_reproducible_runs import archives, metrics, same_archives
-from tests.commands import SMOKE, qdil, start_qdil
+from tests.commands import SMOKE, start_qdil
 
 SPACE = ["--space", "rl.init_args.learning_rate=log:1e-4:1e-2"]
 
@@ -99,9 +99,12 @@ def _ranking(said: str) -> list[tuple[float, str, list[str]]]:
     return [(float(row[0]), row[1], row[2:]) for row in rows]
 
 
-def test_a_killed_search_goes_on_and_each_trial_equals_its_plain_fit(tmp_path) -> None:
+def test_a_killed_search_goes_on_and_each_trial_equals_its_plain_fit(
+    tmp_path, monkeypatch, capsys
+) -> None:
     """Killed (SIGKILL to its process group) once its first trial is re-scored, run again:
-    it ends ranked by re-scored coverage, with no trial run twice, each as ``qdil fit``."""
+    it ends ranked by re-scored coverage, with no trial run twice, each as ``qdil fit``.
+    (The killed search is a process of its own; what follows runs in this process.)"""
     root = tmp_path / "runs"
     command = ["sweep", str(SMOKE), "--seeds", "0"]
     command += ["--root", str(root), "--search", "optuna", *SPACE, "--samples", "2"]
@@ -114,9 +117,13 @@ def test_a_killed_search_goes_on_and_each_trial_equals_its_plain_fit(tmp_path) -
     search.wait()
     (first,) = root.glob("*/eval.json")  # one trial, one at a time, re-scored before the kill
     when = first.stat().st_mtime_ns
-    done = qdil(*command, cwd=tmp_path, check=True)
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.delenv("QDIL_PLUGIN_PATH", raising=False)
+    monkeypatch.setenv("WANDB_MODE", "disabled")  # as tests.commands.user_env gives a process
+    capsys.readouterr()
+    main(command)
     assert first.stat().st_mtime_ns == when  # the finished trial was not run again
-    ranked = _ranking(done.stderr)
+    ranked = _ranking(capsys.readouterr().err)
     assert len(ranked) == 2 and ranked[0][0] >= ranked[1][0]
     assert sorted(root.glob("walker_true-*-seed0")) == sorted(root / name for _, name, _ in ranked)
     for value, name, _ in ranked:
@@ -126,17 +133,7 @@ def test_a_killed_search_goes_on_and_each_trial_equals_its_plain_fit(tmp_path) -
     rows = table.read_text().splitlines()
     assert rows[0] == "run,coverage,rl.init_args.learning_rate" and len(rows) == 3
     _, name, options = ranked[-1]
-    qdil(
-        "fit",
-        str(SMOKE),
-        "--seed",
-        "0",
-        *options,
-        "--logging.root",
-        "plain",
-        cwd=tmp_path,
-        check=True,
-    )
+    main(["fit", str(SMOKE), "--seed", "0", *options, "--logging.root", "plain"])
     trial, alone = root / name, tmp_path / "plain" / "walker_true-seed0"
     assert metrics(trial) == metrics(alone)
     assert same_archives(archives(trial), archives(alone))

@@ -51,6 +51,14 @@ def _ray_down():
         ray.shutdown()
 
 
+@pytest.fixture
+def one_ray() -> None:
+    """A local Ray for the in-process sweeps (2 CPUs), started once: each run of the spec
+    joins it instead of starting its own."""
+    if not ray.is_initialized():
+        ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+
+
 def write(folder: Path, spec: dict) -> Path:
     path = folder / "spec.yaml"
     path.write_text(yaml.safe_dump(spec))
@@ -103,7 +111,7 @@ def test_a_bad_spec_is_refused_naming_the_file_and_key(tmp_path, monkeypatch, ch
     assert not (tmp_path / "runs").exists()
 
 
-def test_a_spec_runs_its_stages_in_order_each_trial_a_plain_fit(tmp_path, monkeypatch) -> None:
+def test_a_spec_runs_its_stages_in_order_each_trial_a_plain_fit(one_ray, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     monkeypatch.delenv("QDIL_PLUGIN_PATH", raising=False)
     path = write(tmp_path, TABLE)
