@@ -26,8 +26,12 @@ def final_archive(run_dir: Path) -> dict[str, np.ndarray]:
     return pickle.loads(state["true_archive"]).data()
 
 
-def test_smoke_fit_writes_config_metrics_and_checkpoint(tmp_path: Path) -> None:
-    qdil("fit", str(SMOKE), "--name", "smoke", cwd=tmp_path, check=True)
+def test_smoke_fit_writes_config_metrics_and_checkpoint(tmp_path: Path, monkeypatch) -> None:
+    """The run is made in this process; the refused second one is a process (its exit status
+    and its message on stderr are the subject)."""
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.delenv("QDIL_PLUGIN_PATH", raising=False)
+    main(["fit", str(SMOKE), "--name", "smoke"])
     run_dir = tmp_path / "runs" / "smoke"
     config = (run_dir / "config.yaml").read_text()
     assert "class_path: qdil.rewards.builtin.TrueReward" in config
@@ -89,9 +93,9 @@ def test_killed_run_resumes_to_the_same_archive(tmp_path: Path) -> None:
         np.testing.assert_array_equal(expected[field][order_e], actual[field][order_a])
 
 
-def test_resume_of_a_directory_without_a_run_is_refused(tmp_path: Path) -> None:
-    result = qdil("fit", "--resume", str(tmp_path), cwd=tmp_path)
-    assert result.returncode != 0 and "not a qdil run directory" in result.stderr
+def test_resume_of_a_directory_without_a_run_is_refused(tmp_path: Path, capsys) -> None:
+    code, _, err = cli(["fit", "--resume", str(tmp_path)], capsys)
+    assert code != 0 and "not a qdil run directory" in err
 
 
 def test_bad_checkpoints_are_reported_with_the_file(tmp_path: Path, monkeypatch) -> None:

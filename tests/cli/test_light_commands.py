@@ -84,3 +84,11 @@ def test_reading_finished_runs_loads_no_lightning_wandb_or_ray(finished, command
     assert (finished / "runs" / "done" / "eval.json").is_file() or command[0] != "eval"
     assert (finished / "report" / "report.md").is_file() or command[0] != "report"
     assert modules.isdisjoint({"lightning", "wandb", "ray"}), modules & {"lightning", "wandb"}
+
+
+def test_a_run_without_wandb_or_ray_loads_neither(tmp_path: Path) -> None:
+    """W&B loads only when a run logs to it, Ray only for the Ray executor or a sweep."""
+    fit = ["fit", str(SMOKE), "--qd.iterations", "1", "--logging.wandb", "disabled"]
+    modules = loaded([[*fit, "--name", "plain"]], tmp_path)
+    assert (tmp_path / "runs" / "plain" / "metrics.csv").is_file()
+    assert modules.isdisjoint({"wandb", "ray"}), modules & {"wandb", "ray"}

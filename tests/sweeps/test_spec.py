@@ -112,14 +112,18 @@ def test_a_bad_spec_is_refused_naming_the_file_and_key(tmp_path, monkeypatch, ch
 
 
 def test_a_spec_runs_its_stages_in_order_each_trial_a_plain_fit(one_ray, tmp_path, monkeypatch):
+    """One grid point runs (planning every point is the test above): the trial that
+    matters, with the learning rate a plain fit is given below."""
     monkeypatch.chdir(tmp_path)
     monkeypatch.delenv("QDIL_PLUGIN_PATH", raising=False)
-    path = write(tmp_path, TABLE)
+    table = yaml.safe_load(yaml.safe_dump(TABLE))
+    table["stages"][1]["grid"] = {"rl.init_args.learning_rate": [0.003]}
+    path = write(tmp_path, table)
     main(["sweep", str(path)])
     assert (tmp_path / "expert.npz").is_file()  # the expert's demonstrations, then imitation
     assert (tmp_path / "report" / "report.md").is_file()
     runs = sorted((tmp_path / "runs").glob("walker_il-*-seed1"))
-    assert len(runs) == 2 and all((run / "eval.json").is_file() for run in runs)
+    assert len(runs) == 1 and all((run / "eval.json").is_file() for run in runs)
     main(["fit", IL, "--seed", "1", "--qd.iterations", "2", "--demos.path", "expert.npz",
           "--bonus.enabled", "false", "--rl.init_args.learning_rate", "0.003",
           "--logging.root", "plain"])  # fmt: skip
