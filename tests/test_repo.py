@@ -74,3 +74,14 @@ def test_every_python_file_is_under_400_lines() -> None:
         if (count := len(path.read_text().splitlines())) >= MAX_LINES
     }
     assert not long, f"split these files by concept (lines): {long}"
+
+
+def test_user_pages_cite_no_tracker_issue_numbers() -> None:
+    """Pages speak to users: a reader has no tracker to look an issue number up in."""
+    pages = [ROOT / "README.md", *ROOT.glob("docs/*.md"), *ROOT.glob("docs/*/*.md")]
+    cited = {
+        str(page.relative_to(ROOT)): found
+        for page in pages
+        if (found := re.findall(r"\b[Ii]ssues? #?\d+", page.read_text()))
+    }
+    assert not cited, cited
