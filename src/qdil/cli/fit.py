@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import shutil
 import sys
 from pathlib import Path
@@ -276,14 +277,18 @@ def fit(argv: list[str]) -> None:
             file=sys.stderr,
         )
     fresh = not run_dir.exists()
+    made = [folder for folder in run_dir.absolute().parents if not folder.exists()]
     run_dir.mkdir(parents=True, exist_ok=True)
     try:
         atomic_write(run_dir / CONFIG_NAME, lambda file: file.write(resolved.encode()))
         init = parser.instantiate(config)
         run = build(init, name, run_dir, resolved, resume=state is not None)
     except BaseException:
-        if fresh:  # a run that never started leaves no directory behind
+        if fresh:  # a run that never started leaves no directory behind, nor its root
             shutil.rmtree(run_dir, ignore_errors=True)
+            for folder in made:  # innermost first; one another process wrote into stays
+                with contextlib.suppress(OSError):
+                    folder.rmdir()
         raise
     if state is not None:
         load_checkpoint(run, state)
