@@ -57,6 +57,17 @@ def start_qdil(*args: str, cwd: Path, env: dict[str, str] | None = None) -> subp
     )
 
 
+def qdil_here(args: list[str], cwd: Path, **env: str) -> None:
+    """``qdil ARGS`` in this process, from ``cwd``, without the suite's plugin folders, with
+    the variables ``env`` set: for tests whose subject is not the process (docs/testing.md)."""
+    with pytest.MonkeyPatch.context() as patch:
+        patch.chdir(cwd)
+        patch.delenv("QDIL_PLUGIN_PATH", raising=False)
+        for key, value in env.items():
+            patch.setenv(key, value)
+        main(args)
+
+
 def cli(args: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
     """(exit code, stdout, stderr) of ``qdil ARGS``, as the console script would give them."""
     try:

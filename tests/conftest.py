@@ -61,9 +61,6 @@ def rng() -> np.random.Generator:
     return np.random.default_rng(12345)
 
 
-SMOKE_RECIPE = Path(__file__).resolve().parents[1] / "recipes" / "smoke" / "walker_true.yaml"
-
-
 @pytest.fixture(scope="session")
 def walker_demos(tmp_path_factory: pytest.TempPathFactory):
     """A small Walker2d demonstration file the tests make themselves (two short episodes)."""
@@ -107,13 +104,10 @@ def _smoke_made(tmp_path_factory: pytest.TempPathFactory, worker_id: str) -> Pat
     root = shared / "smoke-run"
     with FileLock(str(shared / "smoke-run.lock")):
         if not (root / "runs" / "tiny" / "config.yaml").is_file():
-            from qdil.cli import main
+            from tests.commands import SMOKE, qdil_here  # qdil imported after the variables
 
-            with pytest.MonkeyPatch.context() as patch:
-                root.mkdir(exist_ok=True)
-                patch.chdir(root)
-                patch.delenv("QDIL_PLUGIN_PATH", raising=False)
-                main(["fit", str(SMOKE_RECIPE), "--qd.iterations", "1", "--name", "tiny"])
+            root.mkdir(exist_ok=True)
+            qdil_here(["fit", str(SMOKE), "--qd.iterations", "1", "--name", "tiny"], root)
     return root / "runs" / "tiny"
 
 

@@ -59,21 +59,16 @@ def test_version_prints_the_package_version(capsys) -> None:
 
 
 @pytest.fixture(scope="module")
-def finished(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A finished one-iteration smoke run, trained in this process (its folder's parent)."""
-    root = tmp_path_factory.mktemp("light")
-    with pytest.MonkeyPatch.context() as patch:
-        patch.chdir(root)
-        patch.delenv("QDIL_PLUGIN_PATH", raising=False)
-        main(["fit", str(SMOKE), "--qd.iterations", "1", "--name", "done"])
-    return root
+def finished(smoke_run: Path) -> Path:
+    """The folder holding ``runs/tiny``, a finished one-iteration smoke run (the suite's)."""
+    return smoke_run.parents[1]
 
 
 @pytest.mark.parametrize(
     "command",
     [
-        ["report", "runs/done", "--out", "report", "--videos", "1"],
-        ["eval", "runs/done", "--episodes", "1"],  # each sweep trial's re-scoring
+        ["report", "runs/tiny", "--out", "report", "--videos", "1"],
+        ["eval", "runs/tiny", "--episodes", "1"],  # each sweep trial's re-scoring
     ],
     ids=["report", "eval"],
 )
@@ -81,7 +76,7 @@ def test_reading_finished_runs_loads_no_lightning_wandb_or_ray(finished, command
     """Reports and re-scoring read records and play elites (torch and pyribs), never a reward
     model."""
     modules = loaded([command], finished)
-    assert (finished / "runs" / "done" / "eval.json").is_file() or command[0] != "eval"
+    assert (finished / "runs" / "tiny" / "eval.json").is_file() or command[0] != "eval"
     assert (finished / "report" / "report.md").is_file() or command[0] != "report"
     assert modules.isdisjoint({"lightning", "wandb", "ray"}), modules & {"lightning", "wandb"}
 

@@ -19,7 +19,7 @@ from scipy.stats import tukey_hsd
 
 from qdil.evaluation.report import write_report
 from qdil.evaluation.runs import collect_runs
-from tests.commands import SMOKE
+from tests.commands import SMOKE, qdil_here
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 METHODS = ("AIRL-Bonus", "PPGA-trueReward")  # the pairs the tests compare
@@ -27,12 +27,7 @@ METHODS = ("AIRL-Bonus", "PPGA-trueReward")  # the pairs the tests compare
 
 def qdil_fit(*args: str, cwd: Path) -> None:
     """``qdil fit`` of the smoke recipe in this process (a run's records do not depend on it)."""
-    from qdil.cli import main
-
-    with pytest.MonkeyPatch.context() as patch:
-        patch.chdir(cwd)
-        patch.delenv("QDIL_PLUGIN_PATH", raising=False)
-        main(["fit", str(SMOKE), *args])
+    qdil_here(["fit", str(SMOKE), *args], cwd)
 
 
 def copy_run(source: Path, target: Path, **changes: dict) -> Path:

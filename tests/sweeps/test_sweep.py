@@ -17,7 +17,7 @@ import ray
 
 from qdil.cli import main
 from tests.cli.test_reproducible_runs import archives, metrics, same_archives
-from tests.commands import ROOT, SMOKE, qdil, start_qdil
+from tests.commands import ROOT, SMOKE, qdil, qdil_here, start_qdil
 
 IL = ROOT / "recipes" / "smoke" / "walker_il.yaml"
 SEEDS = ("0", "1")  # the kill test needs two trials: one killed, and another beside it
@@ -27,11 +27,8 @@ SEEDS = ("0", "1")  # the kill test needs two trials: one killed, and another be
 def plain(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """``qdil fit`` of the smoke recipe with each seed, as a user runs them one by one."""
     root = tmp_path_factory.mktemp("plain")
-    with pytest.MonkeyPatch.context() as patch:
-        patch.chdir(root)
-        patch.delenv("QDIL_PLUGIN_PATH", raising=False)
-        for seed in SEEDS:
-            main(["fit", str(SMOKE), "--seed", seed])
+    for seed in SEEDS:
+        qdil_here(["fit", str(SMOKE), "--seed", seed], root)
     return root / "runs"
 
 
@@ -47,15 +44,6 @@ def _ray_down():
     yield
     if ray.is_initialized():
         ray.shutdown()
-
-
-def again(command: list[str], cwd: Path) -> None:
-    """``qdil COMMAND`` run again in this process, from ``cwd``, without the suite's plugins."""
-    with pytest.MonkeyPatch.context() as patch:
-        patch.chdir(cwd)
-        patch.delenv("QDIL_PLUGIN_PATH", raising=False)
-        patch.setenv("WANDB_MODE", "disabled")  # as tests.commands.user_env gives a process
-        main(command)
 
 
 def same_runs(a: Path, b: Path) -> bool:
@@ -121,7 +109,7 @@ def test_a_killed_sweep_run_again_ends_as_its_plain_fits(one_ray, plain, tmp_pat
     ]
     assert min(logged, default=0) < 3 or len(logged) < len(SEEDS)  # killed before the end
     assert not report.exists()
-    again(command, tmp_path)
+    qdil_here(command, tmp_path, WANDB_MODE="disabled")  # as user_env gives a process
     for seed in SEEDS:
         run = root / f"walker_true-seed{seed}"
         assert same_runs(run, plain / f"walker_true-seed{seed}")
@@ -129,7 +117,7 @@ def test_a_killed_sweep_run_again_ends_as_its_plain_fits(one_ray, plain, tmp_pat
         assert "wandb_group: sweep-" in (run / "config.yaml").read_text()  # W&B groups them
     assert (report / "report.md").is_file()
     before = {p: p.stat().st_mtime_ns for p in root.glob("walker_*/**/*")}
-    again(command, tmp_path)
+    qdil_here(command, tmp_path, WANDB_MODE="disabled")  # as user_env gives a process
     assert before == {p: p.stat().st_mtime_ns for p in root.glob("walker_*/**/*")}
 
 
