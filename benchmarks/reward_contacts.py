@@ -7,7 +7,7 @@ would pull against it. This script loads the reward model of a run's last checkp
 scores every demonstration transition twice: with its own flags, and with the flags of
 each pattern in turn (both feet up, one foot down, both down) for all of them. A shift of
 the mean score, in units of the critic's spread on the policy's data (σ_π, what
-``reward_type: standardized`` divides by), says how much reward the pattern alone is worth;
+``reward_form: standardized`` divides by), says how much reward the pattern alone is worth;
 beside it stands the expert–policy gap (μ_e − μ_π) / σ_π the critic keeps between the
 demonstrations and the policy.
 

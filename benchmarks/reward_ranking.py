@@ -11,7 +11,7 @@ Make a pool of 48 episodes from the whole archive of an expert run, then score m
 
     qdil demos runs/walker_ppga-seed0 --top 100000 --num 48 --out pool.npz
     python benchmarks/reward_ranking.py pool.npz gail \\
-        "mcwae_wgail:reward_type=calibrated" "mcwae_wgail:reward_type=standardized"
+        "mcwae_wgail:reward_form=calibrated" "mcwae_wgail:reward_form=standardized"
 
 A model is a registered reward name with ``key=value`` options after a colon, separated by
 commas. The models train against the pool's weaker half (``--policy weak``, as an imitation

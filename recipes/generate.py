@@ -188,7 +188,7 @@ def reward_section(task: str, reward: str, paper: bool) -> dict | str:
     if reward == "giril":
         args["pretrain_epochs"] = 10000 if paper else 100
     if reward in STANDARDIZED_REWARDS and not paper:
-        args["reward_type"] = "standardized"
+        args["reward_form"] = "standardized"
     if reward == "diffail" and not paper:
         args["reward_timesteps"] = LAPTOP_DIFFAIL_TIMESTEPS
     return {"class_path": reward, "init_args": args} if args else reward

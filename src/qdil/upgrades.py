@@ -28,6 +28,23 @@ MOVED_VALUES = {
 """Values that older recipes hold, and what they are now (``absorbing: true`` was DAC's
 learned absorbing state before ``floor`` joined it)."""
 
+RENAMED_FORMS = {"gail": "log1-d", "critic": "raw", "logit": "raw", "f": "raw"}
+"""``reward_type`` values of older recipes and the ``reward_form`` that is the same transform
+(each model had its own names for one form). AIRL's ``logit`` became ``score_type: logit``."""
+
+
+def _reward_form(content: dict[str, Any]) -> None:
+    """Move an older recipe's ``reward.init_args.reward_type`` to ``reward_form``, in place."""
+    reward = content.get("reward")
+    args = reward.get("init_args") if isinstance(reward, dict) else None
+    if not isinstance(args, dict) or "reward_type" not in args:
+        return
+    old = args.pop("reward_type")
+    model = str(reward.get("class_path", "")).rpartition(".")[2].lower()
+    if model == "airl" and old == "logit":
+        args.setdefault("score_type", "logit")
+    args.setdefault("reward_form", RENAMED_FORMS.get(old, old))
+
 
 def _classes(value: Any) -> Any:
     if isinstance(value, dict):
@@ -68,6 +85,7 @@ def upgraded(content: dict[str, Any]) -> dict[str, Any]:
         value = parent.get(key[-1]) if isinstance(parent, dict) else None
         if isinstance(value, bool) and value in values:  # True and 1 differ here
             parent[key[-1]] = values[value]
+    _reward_form(content)
     return content
 
 

@@ -20,8 +20,8 @@ FAMILIES = {
     "pwil": [],
     "giril": ["--reward.pretrain_epochs", "2"],
     "wae_gail": [],
-    "wae_wgail": ["--reward.reward_type", "standardized"],
-    "mcwae_wgail": ["--bonus.enabled", "true", "--reward.reward_type", "calibrated"],
+    "wae_wgail": ["--reward.reward_form", "standardized"],
+    "mcwae_wgail": ["--bonus.enabled", "true", "--reward.reward_form", "calibrated"],
 }
 try:  # the example plugin package, installed by the README's test command
     import qdil_vail  # noqa: F401
@@ -160,10 +160,10 @@ def test_a_missing_demo_file_says_how_to_make_one_and_leaves_no_run(
 @pytest.mark.parametrize(
     ("reward", "options", "absorbing"),
     [
-        ("gail", ["--reward.reward_type", "logit"], "learned"),
+        ("gail", ["--reward.reward_form", "raw"], "learned"),
         (
             "mcwae_wgail",
-            ["--bonus.enabled", "true", "--reward.reward_type", "standardized_logit"],
+            ["--bonus.enabled", "true", "--reward.reward_form", "standardized_logit"],
             "floor",
         ),
     ],

@@ -41,7 +41,7 @@ def run(walker_demos: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
         main([
             "fit", str(RECIPE), "--reward", "mcwae_wgail", "--bonus.enabled", "true",
             "--bonus.weight", str(WEIGHT), "--reward.init_args.absorbing", "floor",
-            "--reward.init_args.reward_type", "standardized_logit",
+            "--reward.init_args.reward_form", "standardized_logit",
             "--demos.path", str(walker_demos), "--qd.iterations", "2", "--name", "falls",
         ])  # fmt: skip
     return root / "runs" / "falls"

@@ -248,7 +248,7 @@ def test_fit_of_wqdil_with_its_bonus_is_pinned(
             str(SMOKE / "walker_il.yaml"),
             "--reward",
             "mcwae_wgail",
-            "--reward.reward_type",
+            "--reward.reward_form",
             "calibrated",
             "--reward.latent_dim",  # the pin predates the default of 32
             "8",

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 import torch
@@ -41,7 +43,7 @@ def _rollout(valid: torch.Tensor | None = None) -> Rollout:
 
 def _gail() -> GAIL:
     torch.manual_seed(0)
-    return GAIL(4, 2, 2, absorbing="learned", reward_type="logit", use_measures=True)
+    return GAIL(4, 2, 2, absorbing="learned", reward_form="raw", use_measures=True)
 
 
 def test_a_batch_gains_one_flagged_copy_per_terminated_transition() -> None:
@@ -137,7 +139,7 @@ def test_the_bonus_passes_the_absorbing_state_through_and_other_models_refuse() 
 
 def test_the_floor_is_the_lowest_policy_reward_after_the_update() -> None:
     torch.manual_seed(0)
-    model = GAIL(4, 2, 2, absorbing="floor", reward_type="logit")
+    model = GAIL(4, 2, 2, absorbing="floor", reward_form="raw")
     assert model.input_dim == 6  # no flag: nothing about the absorbing state is learned
     rows = _rollout().flat()
     assert torch.equal(model.absorbing_reward(rows), torch.zeros(len(rows)))  # before any
@@ -145,8 +147,23 @@ def test_the_floor_is_the_lowest_policy_reward_after_the_update() -> None:
     with torch.no_grad():
         lowest = model.reward(rows).min()
     assert torch.equal(model.absorbing_reward(rows[:2]), torch.full((2,), float(lowest)))
-    copy = GAIL(4, 2, 2, absorbing="floor", reward_type="logit")
+    copy = GAIL(4, 2, 2, absorbing="floor", reward_form="raw")
     copy.load_state_dict(model.state_dict())  # checkpointed with the model
     assert float(copy.absorbing_floor) == float(lowest)
-    with pytest.raises(ValueError, match="absorbing must be learned, floor or null"):
+    with pytest.raises(ValueError, match="absorbing must be learned, floor, fixed or null"):
         GAIL(4, 2, 2, absorbing="always")
+
+
+def test_fixed_absorbing_credits_a_true_termination_the_forms_lowest_reward() -> None:
+    model = GAIL(4, 2, 2, reward_form="logd", absorbing="fixed")
+    rollout = _rollout()
+    r_min = math.log(1e-8)
+    torch.testing.assert_close(model.absorbing_reward(rollout.flat()[:3]), torch.full((3,), r_min))
+    # GAE's tail: r_min·γ/(1 − γ) where episodes terminated, not where the time limit cut
+    expected = TERMINATED * (r_min * 0.9 / 0.1)
+    torch.testing.assert_close(AbsorbingTail(model, 10, 0.9, 1)(rollout), expected)
+    # a form bounded below by zero: the fixed value is the zero of a return that stops
+    zero = GAIL(4, 2, 2, reward_form="calibrated_sigmoid", absorbing="fixed")
+    assert torch.equal(AbsorbingTail(zero, 10, 0.9, 1)(rollout), torch.zeros(6, 3))
+    with pytest.raises(ValueError, match=r"reward_form 'raw' has none; choose a form bounded"):
+        GAIL(4, 2, 2, reward_form="raw", absorbing="fixed")

@@ -9,14 +9,19 @@ import pytest
 import torch
 
 from qdil.rewards.bonus import ExplorationBonus
-from qdil.rewards.builtin.wae import MCWAEWGAIL, calibrated_logit, standardized_logit
+from qdil.rewards.builtin.wae import MCWAEWGAIL
 from qdil.rewards.contract import ACT, OBS, K, as_rollout, synthetic, train
+from qdil.rewards.forms import ScoreStats, calibrated_logit, standardized_logit
 from qdil.rewards.nets import gail_reward
+
+
+def stats(expert_mean: float, policy_mean: float, policy_std: float = 1.0, min_gap: float = 1.0):
+    return ScoreStats(expert_mean, policy_mean, policy_std, min_gap)
 
 
 def test_calibrated_logit_puts_expert_and_policy_means_at_plus_and_minus_two() -> None:
     scores = torch.tensor([11.0, -1.0, 5.0, 23.0])
-    logits = calibrated_logit(scores, expert_mean=11.0, policy_mean=-1.0, min_gap=1.0)
+    logits = calibrated_logit(scores, stats(11.0, -1.0))
     np.testing.assert_allclose(logits.numpy(), [2.0, -2.0, 0.0, 6.0], rtol=1e-6)
     rewards = gail_reward(logits)
     assert rewards[0].item() == pytest.approx(-math.log(1 - 1 / (1 + math.exp(-2))), rel=1e-5)
@@ -26,20 +31,21 @@ def test_calibrated_logit_puts_expert_and_policy_means_at_plus_and_minus_two() -
 
 def test_calibrated_logit_is_invariant_to_the_critics_offset_and_scale() -> None:
     scores = torch.linspace(-3, 3, 7)
-    base = calibrated_logit(scores, 2.0, -1.0, min_gap=0.1)
-    drifted = calibrated_logit(7.0 * scores - 40.0, 7.0 * 2.0 - 40.0, 7.0 * -1.0 - 40.0, 0.1)
+    base = calibrated_logit(scores, stats(2.0, -1.0, min_gap=0.1))
+    moved = stats(7.0 * 2.0 - 40.0, 7.0 * -1.0 - 40.0, min_gap=0.1)
+    drifted = calibrated_logit(7.0 * scores - 40.0, moved)
     torch.testing.assert_close(base, drifted, rtol=1e-5, atol=1e-5)
 
 
 def test_calibrated_logit_flattens_when_the_critic_no_longer_separates() -> None:
     scores = torch.tensor([0.01, -0.01])
-    logits = calibrated_logit(scores, expert_mean=0.01, policy_mean=-0.01, min_gap=1.0)
+    logits = calibrated_logit(scores, stats(0.01, -0.01))
     np.testing.assert_allclose(logits.numpy(), [0.04, -0.04], rtol=1e-5)  # not ±2
 
 
 def test_untrained_calibrated_reward_is_the_gail_form_of_the_critic() -> None:
-    model = MCWAEWGAIL(OBS, ACT, K, reward_type="calibrated")
-    reference = MCWAEWGAIL(OBS, ACT, K, reward_type="gail")
+    model = MCWAEWGAIL(OBS, ACT, K, reward_form="calibrated")
+    reference = MCWAEWGAIL(OBS, ACT, K, reward_form="log1-d")
     reference.load_state_dict(model.state_dict())
     batch = synthetic(1.0, 16, seed=0)
     torch.testing.assert_close(model.reward(batch), reference.reward(batch))
@@ -48,7 +54,7 @@ def test_untrained_calibrated_reward_is_the_gail_form_of_the_critic() -> None:
 def test_calibrated_reward_after_training_is_finite_bounded_and_anchored() -> None:
     expert, policy = synthetic(2.0, 400, seed=1), synthetic(-2.0, 400, seed=2)
     model, metrics = train(
-        MCWAEWGAIL(OBS, ACT, K, reward_type="calibrated", batch_size=100), expert, policy, 20
+        MCWAEWGAIL(OBS, ACT, K, reward_form="calibrated", batch_size=100), expert, policy, 20
     )
     last = metrics[-1]
     assert last["critic_expert"] > last["critic_policy"]
@@ -64,7 +70,7 @@ def test_calibrated_reward_after_training_is_finite_bounded_and_anchored() -> No
         rewards = model.reward(batch)
         assert torch.isfinite(rewards).all() and (rewards >= 0).all()
     # the anchors travel with checkpoints
-    clone = MCWAEWGAIL(OBS, ACT, K, reward_type="calibrated")
+    clone = MCWAEWGAIL(OBS, ACT, K, reward_form="calibrated")
     clone.load_state_dict(model.state_dict())
     torch.testing.assert_close(clone.reward(expert), model.reward(expert))
 
@@ -87,17 +93,17 @@ def test_bonus_reports_learned_reward_and_bonus_per_training_step() -> None:
 
 def test_standardized_logit_anchors_and_invariance() -> None:
     scores = torch.tensor([-3.0, -1.0, 1.0, 7.0])
-    logits = standardized_logit(scores, policy_mean=-1.0, policy_std=2.0)
+    logits = standardized_logit(scores, stats(0.0, -1.0, policy_std=2.0))
     np.testing.assert_allclose(logits.numpy(), [-1.0, 0.0, 1.0, 4.0])
     # a critic that drifted by an offset and a scale gives the same logits
-    moved = standardized_logit(5.0 + 3.0 * scores, policy_mean=2.0, policy_std=6.0)
+    moved = standardized_logit(5.0 + 3.0 * scores, stats(0.0, 2.0, policy_std=6.0))
     torch.testing.assert_close(moved, logits)
 
 
 def test_standardized_reward_after_training_centres_the_policy() -> None:
     expert, policy = synthetic(2.0, 400, seed=5), synthetic(-2.0, 400, seed=6)
     model, metrics = train(
-        MCWAEWGAIL(OBS, ACT, K, reward_type="standardized", batch_size=100), expert, policy, 20
+        MCWAEWGAIL(OBS, ACT, K, reward_form="standardized", batch_size=100), expert, policy, 20
     )
     last = metrics[-1]
     assert float(model.critic_policy_std) == pytest.approx(last["critic_policy_std"])
@@ -111,7 +117,7 @@ def test_standardized_reward_after_training_centres_the_policy() -> None:
     # expert transitions, further up the critic, earn more than the policy's on average
     assert last["reward_expert"] > last["reward_policy"] > 0.5
     # σ_π travels with checkpoints; checkpoints without it load with σ_π = 1
-    clone = MCWAEWGAIL(OBS, ACT, K, reward_type="standardized")
+    clone = MCWAEWGAIL(OBS, ACT, K, reward_form="standardized")
     clone.load_state_dict(model.state_dict())
     torch.testing.assert_close(clone.reward(expert), model.reward(expert))
     old = {k: v for k, v in model.state_dict().items() if k != "critic_policy_std"}

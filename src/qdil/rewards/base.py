@@ -99,28 +99,29 @@ class RewardModel(L.LightningModule):
         description: one line shown by ``qdil rewards list``.
         learned: ``update`` trains the model online (False for fixed rewards).
         needs_demos: ``setup`` needs demonstrations.
-        uses_measures: the reward reads δ(s) (measure conditioning).
+        use_measures: the reward reads δ(s) (measure conditioning); an option of the
+            adversarial models and GIRIL.
         needs_next_obs: the reward reads s_{t+1}.
         needs_log_probs: the update reads the policy's log-probabilities (AIRL).
         is_true_reward: the rewards are exactly the task's true rewards.
         prefers_expert: the reward is higher on expert-like transitions (True for
             imitation rewards; False for curiosity rewards such as GIRIL's; None when it
             does not compare, as the true reward). The contract tests check it.
-        absorbing: the model learns the reward of the absorbing state after a termination
-            (:meth:`absorbing_reward`); the loop then adds that state's worth where an
-            episode terminates. An option of the adversarial models (default off).
+        absorbing: how the model prices the absorbing state after a termination
+            (:meth:`absorbing_reward`; ``learned``, ``floor`` or ``fixed``), where the loop
+            then adds that state's worth; ``None``: off. An option of the adversarial models.
     """
 
     name: ClassVar[str] = ""
     description: ClassVar[str] = ""
     learned: ClassVar[bool] = True
     needs_demos: ClassVar[bool] = True
-    uses_measures: ClassVar[bool] = False
+    use_measures: bool = False
     needs_next_obs: ClassVar[bool] = False
     needs_log_probs: ClassVar[bool] = False
     is_true_reward: ClassVar[bool] = False
     prefers_expert: ClassVar[bool | None] = True
-    absorbing: bool = False
+    absorbing: str | None = None
 
     def __init__(self, obs_dim: int, action_dim: int, num_measures: int) -> None:
         super().__init__()
@@ -250,8 +251,8 @@ class RewardModel(L.LightningModule):
         (docs/concepts/absorbing.md).
         """
         raise NotImplementedError(
-            f"reward model {model_label(type(self))} does not learn an absorbing state's "
-            "reward; the adversarial models do (reward.init_args.absorbing: true)"
+            f"reward model {model_label(type(self))} does not price an absorbing state; the "
+            "adversarial models do (reward.init_args.absorbing: learned, floor or fixed)"
         )
 
     def price_absorbing(self, policy: TransitionBatch) -> None:

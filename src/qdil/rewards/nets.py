@@ -7,6 +7,8 @@ from collections.abc import Callable, Sequence
 import torch
 from torch import nn
 
+from qdil.rewards.forms import log_one_minus_d
+
 
 def mlp(
     in_dim: int,
@@ -59,8 +61,9 @@ def gradient_penalty(
 
 
 def gail_reward(logits: torch.Tensor) -> torch.Tensor:
-    """GAIL's reward −log(1 − σ(logit) + 1e-8), as the QD-IL code computes it.
+    """GAIL's reward −log(1 − σ(logit) + 1e-8): the ``log1-d`` reward form.
 
-    ``1e-8`` caps the reward near 18.4 where σ(logit) → 1.
+    ``1e-8`` caps the reward near 18.4 where σ(logit) → 1. Kept for plugins that compute
+    their own reward; a model with a :meth:`score` gets it as ``reward_form: log1-d``.
     """
-    return -torch.log(1 - torch.sigmoid(logits) + 1e-8)
+    return log_one_minus_d(logits)

@@ -44,7 +44,7 @@ class BonusWrapper(RewardModel):
         self.needs_demos = model.needs_demos
         self.needs_log_probs = model.needs_log_probs
         self.needs_next_obs = model.needs_next_obs
-        self.uses_measures = model.uses_measures
+        self.use_measures = model.use_measures
         self.prefers_expert = model.prefers_expert
         self.absorbing = model.absorbing
         # never is_true_reward: the true reward plus a bonus is not the true reward, so the

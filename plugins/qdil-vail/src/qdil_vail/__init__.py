@@ -19,7 +19,7 @@ from typing_extensions import override
 from qdil.data import TransitionBatch
 from qdil.rewards import register_reward
 from qdil.rewards.adversarial import AdversarialReward
-from qdil.rewards.nets import gail_reward, gradient_penalty, mlp
+from qdil.rewards.nets import gradient_penalty, mlp
 
 __all__ = ["VAIL"]
 
@@ -41,6 +41,7 @@ class VAIL(AdversarialReward):
     """
 
     description = "VAIL (Peng et al. 2019): GAIL with a variational discriminator bottleneck"
+    default_form = "log1-d"
 
     def __init__(
         self,
@@ -72,9 +73,9 @@ class VAIL(AdversarialReward):
         return torch.optim.Adam(self.parameters(), lr=self.learning_rate)
 
     @override
-    def reward(self, batch: TransitionBatch) -> torch.Tensor:
+    def score(self, batch: TransitionBatch) -> torch.Tensor:
         mean, _ = self.encode(self.features(batch))
-        return gail_reward(self.head(mean).squeeze(-1))
+        return self.head(mean).squeeze(-1)
 
     @override
     def update(
@@ -111,4 +112,6 @@ class VAIL(AdversarialReward):
             sums["expert_acc"] += float(accuracy[: len(expert_mb)].mean())
             sums["policy_acc"] += float(accuracy[len(expert_mb) :].mean())
             steps += 1
-        return {key: value / max(steps, 1) for key, value in sums.items()}
+        return {key: value / max(steps, 1) for key, value in sums.items()} | self.measure(
+            expert, policy
+        )

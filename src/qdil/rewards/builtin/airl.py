@@ -1,8 +1,9 @@
 """``airl``: Adversarial Inverse Reinforcement Learning (Fu, Luo & Levine, ICLR 2018).
 
 :class:`AIRL`: a discriminator D = exp f / (exp f + π(a | s)) with f = g(s, a) + γ h(s') − h(s);
-the policy is rewarded with f (default) or with the logit f − log π(a | s). Equations and
-choices: docs/rewards/airl.md.
+the score is f (default) or the discriminator's logit f − log π(a | s), and the reward is
+that score (the ``raw`` form) unless ``reward_form`` names another. Equations and choices:
+docs/rewards/airl.md.
 """
 
 from __future__ import annotations
@@ -29,7 +30,8 @@ class AIRL(AdversarialReward):
         num_measures: k.
         hidden: widths of g and h (the paper's discriminator: (100, 100)).
         gamma: discount of the shaping term.
-        reward_type: ``f`` (default) or ``logit`` (f − log π of the transition's policy).
+        score_type: ``f`` (default) or ``logit`` (f − log π of the transition's policy): what the
+            reward form receives.
         **kwargs: :class:`~qdil.rewards.adversarial.AdversarialReward` options.
     """
 
@@ -45,12 +47,14 @@ class AIRL(AdversarialReward):
         *,
         hidden: Sequence[int] = (100, 100),
         gamma: float = 0.99,
-        reward_type: Literal["f", "logit"] = "f",
+        score_type: Literal["f", "logit"] = "f",
         **kwargs: Any,
     ) -> None:
         super().__init__(obs_dim, action_dim, num_measures, **kwargs)
+        if score_type not in ("f", "logit"):
+            raise ValueError(f"AIRL: score_type must be f or logit, got {score_type!r}")
         self.gamma = gamma
-        self.reward_type = reward_type
+        self.score_type = score_type
         self.g = mlp(self.input_dim, hidden, 1)
         self.h = mlp(obs_dim, hidden, 1)
 
@@ -70,9 +74,9 @@ class AIRL(AdversarialReward):
         return g + self.gamma * (1 - done) * self.h(next_obs).squeeze(-1) - self.h(obs).squeeze(-1)
 
     @override
-    def reward(self, batch: TransitionBatch) -> torch.Tensor:
+    def score(self, batch: TransitionBatch) -> torch.Tensor:
         f = self.f(self._inputs(batch))
-        if self.reward_type == "logit":
+        if self.score_type == "logit":
             return f - torch.nan_to_num(batch.log_probs, nan=0.0)
         return f
 
@@ -91,4 +95,4 @@ class AIRL(AdversarialReward):
             logit_p = self.f(in_p) - policy_mb.log_probs
             gp = self.penalty(self.f, in_e, in_p)
             steps.append(self.classify(optimizer, logit_e, logit_p, gp, iteration))
-        return average(steps)
+        return average(steps) | self.measure(expert, policy)

@@ -66,7 +66,7 @@ class MaxEntIRL(AdversarialReward):
         )
 
     @override
-    def reward(self, batch: TransitionBatch) -> torch.Tensor:
+    def score(self, batch: TransitionBatch) -> torch.Tensor:
         return self.raw(self.features(batch))
 
     @override
@@ -88,4 +88,4 @@ class MaxEntIRL(AdversarialReward):
                 "reward_policy": r_p.mean(),
             }
             steps.append({key: float(value.detach()) for key, value in values.items()})
-        return average(steps)
+        return average(steps) | self.measure(expert, policy)
