@@ -60,7 +60,7 @@ class LeastSquaresGAIL(AdversarialReward):
         super().__init__(obs_dim, action_dim, num_measures, **kwargs)
         self.discriminator = mlp(self.input_dim, hidden, 1)
 
-    def score(self, x: torch.Tensor) -> torch.Tensor:
+    def discriminate(self, x: torch.Tensor) -> torch.Tensor:
         """(B,) discriminator output D(x) of inputs x (B, input_dim)."""
         return self.discriminator(x).squeeze(-1)
 
@@ -70,13 +70,13 @@ class LeastSquaresGAIL(AdversarialReward):
 
     @override
     def reward(self, batch: TransitionBatch) -> torch.Tensor:
-        d = self.score(self.features(batch))
+        d = self.discriminate(self.features(batch))
         return (1 - 0.25 * (d - 1).square()).clamp_min(0.0)
 
     def expert_gradient_penalty(self, x_e: torch.Tensor) -> torch.Tensor:
         """E_D[‖∇ₓD(x)‖²] on expert inputs (zero-centred, as in AMP)."""
         x_e = x_e.detach().requires_grad_(True)
-        (grad,) = torch.autograd.grad(self.score(x_e).sum(), x_e, create_graph=True)
+        (grad,) = torch.autograd.grad(self.discriminate(x_e).sum(), x_e, create_graph=True)
         return grad.square().sum(-1).mean()
 
     @override
@@ -88,7 +88,7 @@ class LeastSquaresGAIL(AdversarialReward):
         steps = 0
         for expert_mb, policy_mb in self.minibatches(expert, policy):
             x_e, x_p = self.features(expert_mb), self.features(policy_mb)
-            d_e, d_p = self.score(x_e), self.score(x_p)
+            d_e, d_p = self.discriminate(x_e), self.discriminate(x_p)
             loss = (d_e - 1).square().mean() + (d_p + 1).square().mean()
             gp = self.expert_gradient_penalty(x_e) if self.gp_weight else torch.zeros(())
             loss = loss + 0.5 * self.gp_weight * gp

@@ -131,6 +131,19 @@ def test_a_recipe_of_an_older_run_with_a_moved_class_still_parses(tmp_path: Path
     assert isinstance(fit_parser().instantiate(config).executor, LocalExecutor)
 
 
+def test_a_switch_of_reward_model_leaves_the_recipes_form_behind() -> None:
+    """``--reward gail`` on WQDIL's recipe trains GAIL with GAIL's form, not the critic's."""
+    from qdil.cli.fit import parse_fit
+
+    flagship = str(Path(__file__).resolve().parents[2] / "recipes" / "walker_mcwae.yaml")
+    kept = parse_fit([flagship])[0].reward.init_args
+    assert kept.reward_form == "standardized" and kept.batch_size == 120
+    switched = parse_fit([flagship, "--reward", "gail"])[0].reward.init_args
+    assert switched.reward_form is None and switched.batch_size == 120  # GAIL's log1-d
+    chosen = parse_fit([flagship, "--reward=gail", "--reward.reward_form", "calibrated"])[0]
+    assert chosen.reward.init_args.reward_form == "calibrated"
+
+
 def test_absorbing_true_of_an_older_run_reads_as_learned() -> None:
     """Runs of the first absorbing option stored ``absorbing: true`` (DAC's learned state)."""
     from qdil.upgrades import upgraded

@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING, Any, cast
 
 from qdil.cli.args import plain_text
 from qdil.cli.names import run_stem
+from qdil.cli.reward_flags import drop_form_on_switch, resolve_reward_names, rewrite_reward_flag
 from qdil.files import CONFIG_NAME
 
 # Only the standard library at import time (see qdil.cli): torch, Lightning and pyribs load
@@ -73,49 +74,6 @@ def fit_parser() -> ArgumentParser:
     return parser
 
 
-def _named_reward(name: str) -> type:
-    """The reward model registered as ``name``, or whose class is named ``name`` (``GAIL``).
-
-    Raises:
-        ValueError: for neither, listing the registered names.
-    """
-    from qdil.rewards import get_reward, list_rewards
-
-    if name != name.lower():  # registered names are lowercase: a class name
-        classes = {entry.cls for entry in list_rewards() if entry.cls.__name__ == name}
-        if len(classes) == 1:
-            return classes.pop()
-    return get_reward(name)
-
-
-def _resolve_reward_names(config: dict) -> dict:
-    """Turn a registered reward name (``reward: gail``) or class name into its class path."""
-    reward = config.get("reward")
-    if isinstance(reward, str) and "." not in reward:
-        cls = _named_reward(reward)
-        config["reward"] = {"class_path": f"{cls.__module__}.{cls.__qualname__}"}
-    elif isinstance(reward, dict) and "." not in str(reward.get("class_path", ".")):
-        cls = _named_reward(reward["class_path"])
-        config["reward"] = {**reward, "class_path": f"{cls.__module__}.{cls.__qualname__}"}
-    return config
-
-
-def _rewrite_reward_flag(argv: list[str]) -> list[str]:
-    """``--reward gail`` / ``--reward.help GAIL`` (a registered or class name) -> class path."""
-    out = list(argv)
-    for i, arg in enumerate(out):
-        value = None
-        if arg in ("--reward", "--reward.help") and i + 1 < len(out):
-            value, index = out[i + 1], i + 1
-        elif arg.startswith(("--reward=", "--reward.help=")):
-            value, index = arg.split("=", 1)[1], i
-        if value and "." not in value and value.isidentifier():
-            cls = _named_reward(value)
-            path = f"{cls.__module__}.{cls.__qualname__}"
-            out[index] = path if index == i + 1 else f"{arg.split('=', 1)[0]}={path}"
-    return out
-
-
 def _help_request(argv: list[str]) -> list[str] | None:
     """The first help flag of ``argv`` with its value (``--help``, ``--reward.help gail``)."""
     for i, arg in enumerate(argv):
@@ -135,7 +93,7 @@ def fit_help(request: list[str]) -> None:
 
     discover()  # registered names and plugin classes, for --reward.help NAME
     try:
-        request = _rewrite_reward_flag(request)
+        request = rewrite_reward_flag(request)
     except ValueError as error:
         raise SystemExit(f"qdil fit: error: {request[0]}: {error}") from None
     try:
@@ -194,8 +152,8 @@ def parse_fit(argv: list[str]) -> tuple[Namespace, Path | None, str]:
         raise SystemExit(f"recipe {base} must be a mapping of sections (env, reward, rl, qd, ...)")
     content = upgraded(content)  # a run's config.yaml from before a class or key moved
     try:
-        content = _resolve_reward_names(content)
-        overrides = _rewrite_reward_flag(overrides)
+        content = drop_form_on_switch(resolve_reward_names(content), overrides)
+        overrides = rewrite_reward_flag(overrides)
     except ValueError as error:
         raise SystemExit(f"recipe {base}: reward: {error}") from None
     parser = fit_parser()
