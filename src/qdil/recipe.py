@@ -25,7 +25,7 @@ from qdil.config import (
 from qdil.executors import Executor, LocalExecutor
 from qdil.qd.seats import GradientEstimator, seat_problem
 from qdil.qd.vppo import VPPO
-from qdil.rewards.base import RewardContractError, RewardModel, check_contract
+from qdil.rewards.base import RewardContractError, RewardModel, check_contract, check_demos
 
 # The smallest value of every integer key that has one. jsonargparse checks the types; these
 # limits are checked after parsing so that a message can name the key and how to set it
@@ -122,17 +122,17 @@ def check_values(config: Namespace) -> list[str]:
     reward = config.get("reward")
     path = reward.get("class_path") if isinstance(reward, Namespace) else None
     if isinstance(path, str):
-        problem = _contract_problem(path)
+        problem = _reward_problem(path, config.get("demos.path"))
         if problem:
-            problems.append(f"reward: {problem}")
+            problems.append(problem if problem.startswith("demos.path") else f"reward: {problem}")
     return problems
 
 
-def _contract_problem(path: str) -> str | None:
-    """What the reward model class at ``path`` lacks of the contract, or None.
+def _reward_problem(path: str, demos_path: Any) -> str | None:
+    """What the reward model class at ``path`` lacks (of the contract, or demonstrations).
 
-    Checked here so that an incomplete plugin is refused before a run directory exists and
-    before the environments are built, not at the first call of the missing method.
+    Checked here so that an incomplete plugin, or a model without the demonstrations it
+    needs, is refused before a run directory exists and before the environments are built.
     """
     cut = path.rfind(".")
     while cut > 0:
@@ -146,7 +146,8 @@ def _contract_problem(path: str) -> str | None:
         if isinstance(obj, type) and issubclass(obj, RewardModel):
             try:
                 check_contract(obj)
-            except RewardContractError as error:
+                check_demos(obj, demos_path)
+            except (RewardContractError, ValueError) as error:
                 return str(error)
         return None
     return None

@@ -38,7 +38,7 @@ from qdil.qd.scoring import Scorer
 from qdil.qd.search import make_search, search_emitters
 from qdil.qd.seats import GradientEstimator, Scheduler
 from qdil.qd.state import LoopState, Run
-from qdil.rewards.base import RewardModel
+from qdil.rewards.base import RewardModel, check_demos
 from qdil.rewards.bonus import ExplorationBonus
 from qdil.rewards.ebc import EBCBonus
 from qdil.rl.networks import VectorizedActor
@@ -239,11 +239,9 @@ def _demos(model: RewardModel, demos: DemoConfig, task: str) -> DemoSet | None:
     Raises:
         ValueError: when ``model`` needs demonstrations and ``demos.path`` is unset.
     """
+    check_demos(model, demos.path)
     if not model.needs_demos:
         return None
-    if demos.path is None:
-        label = model.name or type(model).__name__
-        raise ValueError(f"demos.path: the {label} reward model needs demonstrations")
     return load_demos(demos.path, task=task, num_episodes=demos.num_episodes)
 
 

@@ -146,6 +146,11 @@ def test_export_refuses_a_cell_outside_the_grid_naming_it(runs: Path, tmp_path: 
     with pytest.raises(SystemExit, match=r"--cell 10 0 is not a cell of the 10×10 grid"):
         main(["export", str(runs / "Walker2d-v5"), "--cell", "10", "0", "--out", str(tmp_path)])
     assert not any(tmp_path.iterdir())
+    taken = tmp_path / "policy.onnx"  # a file where the folder should be
+    taken.write_text("kept")
+    with pytest.raises(SystemExit, match=r"--out .*policy\.onnx is a file; give a folder"):
+        main(["export", str(runs / "Walker2d-v5"), "--best", "--out", str(taken)])
+    assert taken.read_text() == "kept"
 
 
 def test_the_archive_as_a_minari_dataset_reads_back_as_demonstrations(

@@ -89,6 +89,30 @@ def test_a_missing_demonstration_file_stops_the_sweep_before_anything_starts(tmp
     assert not root.exists()
 
 
+def test_a_recipe_without_the_demonstrations_its_model_needs_stops_the_sweep(tmp_path) -> None:
+    """The check qdil fit makes when a run starts, made for every trial before any starts."""
+    root = tmp_path / "runs"
+    command = ["sweep", str(SMOKE), str(IL), "--seeds", "0", "--root", str(root)]
+    with pytest.raises(SystemExit, match=r"walker_il\.yaml: demos\.path: the gail reward model"):
+        main([*command, "--demos.path", "null"])
+    assert not root.exists()
+
+
+def test_an_unreachable_cluster_address_is_named_within_seconds(tmp_path) -> None:
+    root = tmp_path / "runs"
+    started = time.monotonic()
+    with pytest.raises(SystemExit, match=r"cannot reach the Ray cluster at '127\.0\.0\.1:1'"):
+        main(["sweep", str(SMOKE), "--seeds", "0", "--address", "127.0.0.1:1", "--root", str(root)])
+    assert time.monotonic() - started < 60  # ray.init alone waited for minutes
+
+
+def test_a_spec_that_is_not_valid_yaml_is_named_with_its_line(tmp_path) -> None:
+    spec = tmp_path / "broken.yaml"
+    spec.write_text("name: broken\nstages:\n  - recipes: [a.yaml\n    seeds: [0]\n")
+    with pytest.raises(SystemExit, match=r"broken\.yaml is not valid YAML at line \d+, column"):
+        main(["sweep", str(spec)])
+
+
 def test_a_killed_sweep_run_again_ends_as_its_plain_fits(one_ray, plain, tmp_path) -> None:
     """The driver, Ray and the trials killed at once (SIGKILL to the process group); the same
     command again finishes every trial as ``qdil fit`` would have, re-scores them and reports;

@@ -68,7 +68,7 @@ class RayExecutor(ShardedExecutor):
     def _launch(self, factory: Any, bounds: list[tuple[int, int]]) -> None:
         ray = import_ray()
         if not ray.is_initialized():
-            _check_reachable(self.address)
+            check_reachable(self.address)
             # a Ray older than its token authentication has no AuthenticationError to catch
             refused = getattr(ray.exceptions, "AuthenticationError", ConnectionError)
             try:
@@ -130,7 +130,7 @@ def ray_address(address: str | None) -> str:
     return os.environ.get("RAY_ADDRESS") or "local"
 
 
-def _check_reachable(address: str | None) -> None:
+def check_reachable(address: str | None) -> None:
     """Refuse an address whose port does not answer (``ray.init`` would wait for minutes).
 
     Raises:

@@ -112,8 +112,8 @@ def export_policies(
         The files written, in the order chosen.
 
     Raises:
-        ValueError: for an empty archive, a cell outside the grid or an empty cell, or an
-            unknown format.
+        ValueError: for an empty archive, a cell outside the grid or an empty cell, an
+            unknown format, or an ``out`` that is a file.
         CheckpointError: for a run without a readable checkpoint.
     """
     run_dir, out = Path(run_dir), Path(out)
@@ -121,6 +121,8 @@ def export_policies(
         raise ValueError(f"--format must be onnx, torch or minari, got {fmt!r}")
     if episodes < 1:
         raise ValueError(f"--episodes must be at least 1, got {episodes}")
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"--out {out} is a file; give a folder for the policy files")
     archive, iteration = load_archive(run_dir, which)
     elites = archive.data()
     rows = select_rows(archive, elites, cell, top)

@@ -8,6 +8,7 @@ and rules: docs/rewards/index.md (section "The contract").
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any, ClassVar
 
 import lightning as L
@@ -65,6 +66,18 @@ def model_label(cls: type[RewardModel]) -> str:
     """``name (module.Class)``, or ``module.Class`` for an unregistered class: what to open."""
     path = f"{cls.__module__}.{cls.__qualname__}"
     return f"{cls.name} ({path})" if cls.name else path
+
+
+def check_demos(model: RewardModel | type[RewardModel], path: str | Path | None) -> None:
+    """Refuse a reward model (an instance or its class) that needs demonstrations, without any.
+
+    Raises:
+        ValueError: naming ``demos.path`` and the model.
+    """
+    if model.needs_demos and path is None:
+        cls = model if isinstance(model, type) else type(model)
+        label = model.name or cls.__name__
+        raise ValueError(f"demos.path: the {label} reward model needs demonstrations")
 
 
 def check_contract(cls: type[RewardModel]) -> None:

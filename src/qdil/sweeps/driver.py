@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Any
 
 from ray.tune import Callback
 
-from qdil.executors.ray import ray_address
+from qdil.executors.ray import check_reachable, ray_address
 from qdil.sweeps.trials import Trial
 
 if TYPE_CHECKING:
@@ -104,6 +104,7 @@ def run_sweep(
     import ray
     from ray import tune
 
+    check_reachable(resources.address)  # ray.init would wait minutes for a dead address
     started = not ray.is_initialized()
     if started:
         ray.init(

@@ -67,11 +67,20 @@ class Spec:
 
 
 def is_spec(path: Path) -> bool:
-    """Whether ``path`` is a sweep spec (a YAML mapping with ``stages``), not a recipe."""
+    """Whether ``path`` is a sweep spec (a YAML mapping with ``stages``), not a recipe.
+
+    Raises:
+        ValueError: if the file is not valid YAML, naming the file, line and problem.
+    """
     try:
         content = yaml.safe_load(path.read_text())
-    except (OSError, yaml.YAMLError):
-        return False
+    except OSError:
+        return False  # a missing recipe is named where recipes are read
+    except yaml.YAMLError as error:
+        mark = getattr(error, "problem_mark", None)
+        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
+        problem = getattr(error, "problem", None) or str(error).splitlines()[0]
+        raise ValueError(f"{path} is not valid YAML{where}: {problem}") from None
     return isinstance(content, dict) and "stages" in content
 
 
