@@ -139,23 +139,58 @@ def test_every_module_imports_alone() -> None:
     assert done.stdout.strip() == "FAILED:"
 
 
-# the floors of docs/concepts, bottom up: physics and RL, then the QD loop, then what
-# scores, records and starts runs
+# the floors of docs/concepts, bottom up: plain data and files; physics, RL, demonstrations,
+# reward models and the seats' contracts; the recipe's sections; the QD loop; what loads
+# recipes, builds, scores, records, sweeps and exports runs; the commands (and the package's
+# root, which registers the tasks). Every module sits on one.
 FLOORS = (
-    ("qdil.envs", "qdil.rl", "qdil.executors", "qdil.demos"),
+    (
+        "qdil.data",
+        "qdil.devices",
+        "qdil.files",
+        "qdil.numerics",
+        "qdil.provenance",
+        "qdil.reductions",
+        "qdil.upgrades",
+    ),
+    ("qdil.envs", "qdil.rl", "qdil.executors", "qdil.demos", "qdil.rewards", "qdil.seats"),
+    ("qdil.config",),
     ("qdil.qd",),
-    ("qdil.evaluation", "qdil.tracking", "qdil.run", "qdil.cli"),
+    (
+        "qdil.recipe",
+        "qdil.recipe_load",
+        "qdil.run_names",
+        "qdil.run",
+        "qdil.evaluation",
+        "qdil.tracking",
+        "qdil.export",
+        "qdil.sweeps",
+    ),
+    ("qdil.cli", "qdil"),
 )
+
+
+def _floor_of(name: str) -> int | None:
+    """The floor of module ``name``: its longest matching package or module."""
+    matches = [
+        (len(package), level)
+        for level, floor in enumerate(FLOORS)
+        for package in floor
+        if name == package or name.startswith(f"{package}.")
+    ]
+    return max(matches)[1] if matches else None
+
+
+def test_every_module_sits_on_a_floor() -> None:
+    assert [name for name in modules() if _floor_of(name) is None] == []
 
 
 def test_no_floor_imports_from_a_floor_above() -> None:
     known = modules()
     reaching_up = {}
-    for level, floor in enumerate(FLOORS):
-        above = tuple(package for upper in FLOORS[level + 1 :] for package in upper)
-        for name, path in known.items():
-            if name.startswith(floor) and above:
-                up = sorted(t for t in imported(name, path, known) if t.startswith(above))
-                if up:
-                    reaching_up[name] = up
+    for name, path in known.items():
+        level = _floor_of(name)
+        up = sorted(t for t in imported(name, path, known) if (_floor_of(t) or 0) > (level or 0))
+        if up:
+            reaching_up[name] = up
     assert reaching_up == {}

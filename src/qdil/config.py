@@ -4,7 +4,7 @@ A recipe is one YAML file with the sections ``seed``, ``name``, ``env``, ``polic
 ``reward``, ``bonus``, ``demos``, ``qd`` and ``logging``. Classes are chosen with jsonargparse's
 ``class_path``/``init_args`` (LightningCLI's dialect): ``rl`` (the gradient estimator),
 ``reward`` (a reward model, or its registered name), ``qd.emitter`` and ``qd.scheduler``; the
-seats they fill are declared in :mod:`qdil.qd.seats`.
+seats they fill are declared in :mod:`qdil.seats`.
 Every default lives in a signature here or in the chosen class, so it is documented once.
 """
 
@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Any, Literal
 import numpy as np
 from ribs.archives import ArchiveBase
 
-from qdil.qd.seats import Emitter, Scheduler
+from qdil.seats import Emitter, Scheduler
 
 if TYPE_CHECKING:
     from qdil.rewards.base import RewardModel

@@ -23,9 +23,9 @@ from qdil.config import (
     RewardFactory,
 )
 from qdil.executors import Executor, LocalExecutor
-from qdil.qd.seats import GradientEstimator, seat_problem
 from qdil.qd.vppo import VPPO
 from qdil.rewards.base import RewardContractError, RewardModel, check_contract, check_demos
+from qdil.seats import GradientEstimator, seat_problem
 
 # The smallest value of every integer key that has one. jsonargparse checks the types; these
 # limits are checked after parsing so that a message can name the key and how to set it
@@ -77,7 +77,7 @@ def recipe(
         qd: archives, emitter, scheduler and evaluation.
         policy: the policies the archive's solutions are (network widths, observation clip).
         rl: the gradient estimator (``class_path``: ``qdil.qd.VPPO``, ``qdil.qd.ESGradients``
-            or any class with the members of ``qdil.qd.seats.GradientEstimator``); ``null``
+            or any class with the members of ``qdil.seats.GradientEstimator``); ``null``
             for gradient-free emitters (sep-CMA-MAE), which need none.
         bonus: an exploration bonus added to any reward model (``type``: ``single_step``
             or ``ebc``).
@@ -122,18 +122,14 @@ def check_values(config: Namespace) -> list[str]:
     reward = config.get("reward")
     path = reward.get("class_path") if isinstance(reward, Namespace) else None
     if isinstance(path, str):
-        problem = _reward_problem(path, config.get("demos.path"))
+        problem = _contract_problem(path)
         if problem:
-            problems.append(problem if problem.startswith("demos.path") else f"reward: {problem}")
+            problems.append(f"reward: {problem}")
     return problems
 
 
-def _reward_problem(path: str, demos_path: Any) -> str | None:
-    """What the reward model class at ``path`` lacks (of the contract, or demonstrations).
-
-    Checked here so that an incomplete plugin, or a model without the demonstrations it
-    needs, is refused before a run directory exists and before the environments are built.
-    """
+def reward_class(path: str) -> type[RewardModel] | None:
+    """The reward model class at ``path`` (``module.Class``, nested classes too), or None."""
     cut = path.rfind(".")
     while cut > 0:
         try:
@@ -143,13 +139,38 @@ def _reward_problem(path: str, demos_path: Any) -> str | None:
             continue
         for attr in path[cut + 1 :].split("."):
             obj = getattr(obj, attr, None)
-        if isinstance(obj, type) and issubclass(obj, RewardModel):
-            try:
-                check_contract(obj)
-                check_demos(obj, demos_path)
-            except (RewardContractError, ValueError) as error:
-                return str(error)
-        return None
+        return obj if isinstance(obj, type) and issubclass(obj, RewardModel) else None
+    return None
+
+
+def _contract_problem(path: str) -> str | None:
+    """What the reward model class at ``path`` lacks of the contract, or None.
+
+    Checked here so that an incomplete plugin is refused before a run directory exists and
+    before the environments are built, not at the first call of the missing method.
+    """
+    cls = reward_class(path)
+    try:
+        if cls is not None:
+            check_contract(cls)
+    except RewardContractError as error:
+        return str(error)
+    return None
+
+
+def demos_problem(config: Namespace) -> str | None:
+    """Why the recipe's reward model cannot start: it needs demonstrations and has none.
+
+    ``qdil fit`` meets this when its run starts; a sweep asks before any trial starts.
+    """
+    reward = config.get("reward")
+    path = reward.get("class_path") if isinstance(reward, Namespace) else None
+    cls = reward_class(path) if isinstance(path, str) else None
+    try:
+        if cls is not None:
+            check_demos(cls, config.get("demos.path"))
+    except ValueError as error:
+        return str(error)
     return None
 
 
@@ -166,7 +187,7 @@ def class_path_problem(content: dict[str, Any], overrides: list[str]) -> str | N
 
     Returns:
         ``"<key>: <what is wrong>"`` for the first class that cannot be imported or lacks
-        members of its seat (:mod:`qdil.qd.seats`), or None.
+        members of its seat (:mod:`qdil.seats`), or None.
     """
     search = _has_estimator(content, overrides)
     for key, path in _class_paths(content, overrides):

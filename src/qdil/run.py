@@ -36,12 +36,12 @@ from qdil.qd.archives import (
 )
 from qdil.qd.scoring import Scorer
 from qdil.qd.search import make_search, search_emitters
-from qdil.qd.seats import GradientEstimator, Scheduler
 from qdil.qd.state import LoopState, Run
 from qdil.rewards.base import RewardModel, check_demos
 from qdil.rewards.bonus import ExplorationBonus
 from qdil.rewards.ebc import EBCBonus
 from qdil.rl.networks import VectorizedActor
+from qdil.seats import GradientEstimator, Scheduler
 from qdil.tracking import Tracker
 
 

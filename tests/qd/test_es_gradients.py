@@ -13,8 +13,8 @@ from run_rows import rows
 from qdil.cli import main
 from qdil.qd import ESGradients
 from qdil.qd.es_gradients import centered_ranks, es_gradients
-from qdil.qd.seats import GradientEstimator
 from qdil.rl.normalize import RunningMeanStd
+from qdil.seats import GradientEstimator
 
 ROOT = Path(__file__).resolve().parents[2]
 

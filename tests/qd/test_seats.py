@@ -13,7 +13,7 @@ from run_rows import rows
 
 from qdil.cli import main
 from qdil.qd import VPPO, XNES, PPGAEmitter
-from qdil.qd.seats import (
+from qdil.seats import (
     Emitter,
     GradientEstimator,
     Scheduler,

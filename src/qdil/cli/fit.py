@@ -9,9 +9,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, cast
 
 from qdil.cli.args import plain_text
-from qdil.cli.names import run_stem
-from qdil.cli.reward_flags import drop_form_on_switch, resolve_reward_names, rewrite_reward_flag
 from qdil.files import CONFIG_NAME
+from qdil.rewards.names import rewrite_reward_flag
 
 # Only the standard library at import time (see qdil.cli): torch, Lightning and pyribs load
 # inside the functions that use them.
@@ -36,10 +35,10 @@ FIT_EPILOG = (
 
 
 def fit_parser() -> ArgumentParser:
-    """The jsonargparse parser of ``qdil fit``."""
-    from jsonargparse import ActionConfigFile, ArgumentParser, DefaultHelpFormatter
+    """The jsonargparse parser of ``qdil fit``: the recipe's, with plain help texts."""
+    from jsonargparse import ArgumentParser, DefaultHelpFormatter
 
-    from qdil.recipe import recipe
+    from qdil.recipe_load import recipe_parser
 
     class PlainHelpFormatter(DefaultHelpFormatter):
         """jsonargparse's help, its docstring-made texts without reStructuredText markup."""
@@ -60,18 +59,14 @@ def fit_parser() -> ArgumentParser:
             kwargs.setdefault("formatter_class", PlainHelpFormatter)
             super().__init__(*args, **kwargs)
 
-    parser = PlainArgumentParser(
+    return recipe_parser(
+        PlainArgumentParser,
         prog="qdil fit",
         usage=FIT_USAGE,
         description="Train a QD-IL archive from a recipe: a YAML file with the sections "
         "below; any key can be overridden on the command line.",
         epilog=FIT_EPILOG,
-        default_env=False,
-        exit_on_error=False,
     )
-    parser.add_argument("--config", action=ActionConfigFile, help="the recipe (YAML)")
-    parser.add_function_arguments(recipe, as_positional=False)
-    return parser
 
 
 def _help_request(argv: list[str]) -> list[str] | None:
@@ -106,69 +101,26 @@ def fit_help(request: list[str]) -> None:
 def parse_fit(argv: list[str]) -> tuple[Namespace, Path | None, str]:
     """Parse ``qdil fit`` arguments; returns (config, run dir to resume or None, name stem).
 
-    The values are checked here, before any run directory exists. The stem of a new run's
-    default name is the recipe's, or says what the command line ran
-    (:func:`qdil.cli.names.run_stem`).
+    :func:`qdil.recipe_load.load_recipe` on the command line's recipe or ``--resume`` run.
 
     Raises:
         SystemExit: with a message naming the recipe key on a bad recipe.
     """
-    import yaml
+    from qdil.recipe_load import RecipeError, load_recipe
 
-    from qdil.recipe import check_values, class_path_problem
-    from qdil.rewards import discover
-    from qdil.upgrades import upgraded
-
-    discover()
-    resume_dir = None
     if argv and argv[0] == "--resume":
         if len(argv) < 2:
             raise SystemExit("qdil fit --resume needs a run directory")
-        resume_dir = Path(argv[1])
-        config_path = resume_dir / CONFIG_NAME
-        if not config_path.is_file():
-            raise SystemExit(
-                f"{resume_dir} is not a qdil run directory (no {CONFIG_NAME}); give a "
-                "directory made by `qdil fit RECIPE.yaml`"
-            )
-        base, overrides, stem = config_path, argv[2:], resume_dir.name
+        source, overrides, resume = argv[1], argv[2:], True
     elif argv and not argv[0].startswith("-"):
-        base, overrides, stem = Path(argv[0]), argv[1:], Path(argv[0]).stem
-        if not base.exists():
-            raise SystemExit(f"recipe {base} not found")
-        if base.is_dir():
-            examples = sorted(base.glob("*.yaml"))[:1]
-            example = f", e.g. {examples[0]}" if examples else ""
-            raise SystemExit(f"recipe {base} is a directory; give a recipe file (YAML){example}")
+        source, overrides, resume = argv[0], argv[1:], False
     else:
         raise SystemExit(f"usage: {FIT_USAGE}\n(qdil fit --help lists the recipe's keys)")
     try:
-        content = yaml.safe_load(base.read_text()) or {}
-    except yaml.YAMLError as error:
-        raise SystemExit(f"recipe {base} is not valid YAML: {error}") from None
-    except (OSError, UnicodeDecodeError) as error:
-        raise SystemExit(f"recipe {base} cannot be read: {error}") from None
-    if not isinstance(content, dict):
-        raise SystemExit(f"recipe {base} must be a mapping of sections (env, reward, rl, qd, ...)")
-    content = upgraded(content)  # a run's config.yaml from before a class or key moved
-    try:
-        content = drop_form_on_switch(resolve_reward_names(content), overrides)
-        overrides = rewrite_reward_flag(overrides)
-    except ValueError as error:
-        raise SystemExit(f"recipe {base}: reward: {error}") from None
-    parser = fit_parser()
-    try:
-        config = parser.parse_args(["--config", yaml.safe_dump(content), *overrides])
-    except Exception as error:  # jsonargparse's error names the key and the allowed values
-        # ...but a class in a missing module reads as a type mismatch of the whole union
-        problem = class_path_problem(content, overrides)
-        raise SystemExit(f"recipe {base}: {problem or error}") from None
-    problems = check_values(config)
-    if problems:
-        raise SystemExit("\n".join(f"recipe {base}: {problem}" for problem in problems))
-    if resume_dir is None:
-        stem = run_stem(stem, content, config)
-    return config, resume_dir, stem
+        loaded = load_recipe(source, overrides, resume=resume)
+    except RecipeError as error:
+        raise SystemExit(str(error)) from None
+    return loaded.config, loaded.resume_dir, loaded.stem
 
 
 def fit(argv: list[str]) -> None:

@@ -8,6 +8,7 @@ The steps, and why the returns differ from the archive's: docs/concepts/demonstr
 from __future__ import annotations
 
 import datetime
+from importlib.metadata import version
 from pathlib import Path
 from typing import Any
 
@@ -15,7 +16,6 @@ import numpy as np
 import torch
 import yaml
 
-import qdil
 from qdil.demos.dataset import DemoSet
 from qdil.envs.vector import LocomotionVectorEnv
 from qdil.files import CONFIG_NAME
@@ -216,7 +216,7 @@ def demos_from_run(
         "recipe": config,
         "reset_seed": seed,
         "deterministic": True,
-        "qdil_version": qdil.__version__,
+        "qdil_version": version("qdil"),
         "git_commit": commit,
         "git_dirty": dirty,
         "created": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),

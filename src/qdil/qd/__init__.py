@@ -1,4 +1,4 @@
-"""The quality-diversity side: seats, archives, emitters, xNES, estimators (VPPO, ES), loop."""
+"""The quality-diversity side: archives, emitters, xNES, estimators (VPPO, ES), the loop."""
 
 from qdil.qd.emitter import PPGAEmitter
 from qdil.qd.es_emitter import EvolutionStrategyEmitter

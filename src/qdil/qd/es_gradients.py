@@ -1,6 +1,6 @@
 """Evolution-strategy gradients: ∇f and ∇m_j at θ_μ from perturbed-policy episodes.
 
-:class:`ESGradients` fills the loop's :class:`~qdil.qd.seats.GradientEstimator` seat without
+:class:`ESGradients` fills the loop's :class:`~qdil.seats.GradientEstimator` seat without
 training anything: it plays mirrored perturbations θ_μ ± σε through the run's executor,
 turns their objectives and measures into centred ranks and estimates every row of the
 Jacobian from the same episodes (OpenAI-ES as dqd-rl's CMA-MEGA (ES) does). With PPGA's
@@ -15,9 +15,9 @@ import numpy as np
 
 from qdil.data import Rollout
 from qdil.qd.scoring import Scorer
-from qdil.qd.seats import PhaseResult
 from qdil.rl.collect import RewardFn
 from qdil.rl.normalize import RunningMeanStd
+from qdil.seats import PhaseResult
 
 if TYPE_CHECKING:
     import torch

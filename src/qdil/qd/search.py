@@ -12,8 +12,8 @@ import numpy as np
 from ribs.schedulers import Scheduler as PyribsScheduler
 
 from qdil.qd.emitter import PPGAEmitter
-from qdil.qd.seats import Emitter, Scheduler, SearchEmitter, seat_problem
 from qdil.rl.normalize import RunningMeanStd
+from qdil.seats import Emitter, Scheduler, SearchEmitter, seat_problem
 
 if TYPE_CHECKING:
     from ribs.archives import ArchiveBase
@@ -37,7 +37,7 @@ def make_search(
 ) -> tuple[SearchEmitter | None, Scheduler]:
     """The emitters that start from ``x0`` and the scheduler over ``main``.
 
-    The recipe schema has checked that the classes fill their seats (:mod:`qdil.qd.seats`);
+    The recipe schema has checked that the classes fill their seats (:mod:`qdil.seats`);
     beside a gradient estimator (``search``) they must fill the search seats, checked here.
 
     Args:

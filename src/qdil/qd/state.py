@@ -25,8 +25,8 @@ if TYPE_CHECKING:
     from qdil.executors.base import Executor
     from qdil.qd.archives import RunArchives
     from qdil.qd.scoring import Scorer
-    from qdil.qd.seats import GradientEstimator, Scheduler, SearchEmitter
     from qdil.rewards.base import RewardModel
+    from qdil.seats import GradientEstimator, Scheduler, SearchEmitter
 
 
 class IterationProgress(Protocol):

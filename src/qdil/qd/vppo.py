@@ -3,7 +3,7 @@
 Reads top to bottom (CleanRL style): :meth:`VPPO.compute_jacobian` trains k+1 copies of
 θ_μ side by side, :meth:`VPPO.walk` moves θ_μ, both with the same PPO update
 (:func:`qdil.rl.ppo.ppo_update`, its settings one object, ``self.ppo``); the run's executor
-steps the simulations. It fills the loop's :class:`~qdil.qd.seats.GradientEstimator` seat.
+steps the simulations. It fills the loop's :class:`~qdil.seats.GradientEstimator` seat.
 Why each detail is as it is: ``docs/concepts/vppo.md``.
 """
 
@@ -15,11 +15,11 @@ from typing import TYPE_CHECKING
 import numpy as np
 import torch
 
-from qdil.qd.seats import PhaseResult
 from qdil.rl.collect import RewardFn
 from qdil.rl.networks import VectorizedActor, VectorizedCritic
 from qdil.rl.normalize import RunningMeanStd
 from qdil.rl.ppo import PPOSettings, ppo_update
+from qdil.seats import PhaseResult
 
 if TYPE_CHECKING:
     from qdil.config import PolicyConfig

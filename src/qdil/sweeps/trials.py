@@ -111,9 +111,9 @@ def plan_trials(
         SystemExit: a bad recipe or override (naming the recipe and key), two trials that
             would share a folder, or a folder holding a run of another configuration.
     """
-    from qdil.cli.fit import fit_parser
+    from qdil.recipe_load import recipe_parser
 
-    parser, trials, configs = fit_parser(), [], {}
+    parser, trials, configs = recipe_parser(), [], {}
     for recipe in recipes:
         for seed in seeds:
             trial, resolved = plan_trial(recipe, seed, overrides, root, parser)
@@ -143,12 +143,17 @@ def plan_trial(
         SystemExit: a bad recipe or override, a missing demonstration file, or a folder
             holding a run of another configuration.
     """
-    from qdil.cli.fit import fit_parser, parse_fit
+    from qdil.recipe import demos_problem
+    from qdil.recipe_load import RecipeError, load_recipe, recipe_parser
 
-    parser = parser or fit_parser()
+    parser = parser or recipe_parser()
     recipe, root = recipe.resolve(), root.resolve()
     args = [*flat(overrides), "--seed", str(seed), "--logging.root", str(root)]
-    config, _, stem = parse_fit([str(recipe), *args])
+    try:
+        loaded = load_recipe(recipe, args)
+    except RecipeError as error:
+        raise SystemExit(str(error)) from None
+    config, stem = loaded.config, loaded.stem
     _check_demos(recipe, config, pending or set())
     name = trial_name(stem, seed, overrides)
     trial = Trial(recipe, seed, tuple(overrides), name, root, Path.cwd())
@@ -157,6 +162,9 @@ def plan_trial(
         parser.instantiate(config)
     except (ValueError, TypeError) as error:
         raise SystemExit(f"qdil sweep: recipe {recipe}: {error}") from None
+    missing = demos_problem(config)  # the check qdil fit makes when its run starts
+    if missing:
+        raise SystemExit(f"qdil sweep: recipe {recipe}: {missing}")
     _check_folder(trial, resolved)
     return trial, resolved
 

@@ -1,6 +1,6 @@
 """The default name of a new run: the recipe's, or one that says what the command line ran.
 
-Only the standard library at import time, as for the rest of ``qdil.cli``.
+Only the standard library at import time: the commands that name runs stay light.
 """
 
 from __future__ import annotations

@@ -186,5 +186,5 @@ def seat_problem(key: str, candidate: object, search: bool = False) -> str | Non
     free = " (a gradient-free one runs with rl: null)" if search and key in SEARCH_SEATS else ""
     return (
         f"{name} is not a {seat.title}: it lacks {', '.join(missing)}{free} "
-        f"(qdil.qd.seats.{seat.__name__} lists what the loop calls; docs/concepts/seats.md)"
+        f"(qdil.seats.{seat.__name__} lists what the loop calls; docs/concepts/seats.md)"
     )
