@@ -159,6 +159,7 @@ FLOORS = (
     (
         "qdil.recipe",
         "qdil.recipe_load",
+        "qdil.experiment",
         "qdil.run_names",
         "qdil.run",
         "qdil.evaluation",

@@ -1,6 +1,7 @@
-"""``qdil fit`` is reproducible: the same seed twice, and a resumed run against an uninterrupted
-one, give identical ``metrics.csv`` files and archives (timings aside), at a size where
-MKL splits the PPO update's products among threads (larger than the smoke recipe)."""
+"""``qdil fit`` is reproducible: the same seed twice (once in a process of its own), a resumed
+run against an uninterrupted one, and a run stepped from Python (``qdil.experiment``) give
+identical ``metrics.csv`` files and archives (timings aside), at a size where MKL splits the
+PPO update's products among threads (larger than the smoke recipe)."""
 
 from __future__ import annotations
 
@@ -16,6 +17,8 @@ import torch
 import yaml
 
 from qdil.cli import main
+from qdil.experiment import Experiment
+from tests.commands import qdil
 
 ROOT = Path(__file__).resolve().parents[2]
 RECIPE = ROOT / "recipes" / "smoke" / "walker_il.yaml"
@@ -79,15 +82,16 @@ def make_older(run_dir: Path) -> None:
 
 @pytest.fixture(scope="module")
 def runs(walker_demos: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """Four runs of one seed: twice three iterations, and two iterations resumed to three,
-    once as they are and once rewritten in the layout of before the seats."""
+    """Four runs of one seed: twice three iterations (the second in a ``qdil fit`` process),
+    and two iterations resumed to three, once as they are and once rewritten in the layout of
+    before the seats."""
     root = tmp_path_factory.mktemp("reproducible")
     common = ["fit", str(RECIPE), *LARGER, "--demos.path", str(walker_demos)]
     with pytest.MonkeyPatch.context() as patch:
         patch.chdir(root)
         patch.delenv("QDIL_PLUGIN_PATH", raising=False)  # only ./plugins, absent here
         main([*common, "--qd.iterations", "3", "--name", "first"])
-        main([*common, "--qd.iterations", "3", "--name", "second"])
+        qdil(*common, "--qd.iterations", "3", "--name", "second", cwd=root, check=True)
         main([*common, "--qd.iterations", "2", "--name", "resumed"])
         shutil.copytree("runs/resumed", "runs/older")
         make_older(Path("runs/older"))
@@ -101,6 +105,27 @@ def test_the_same_seed_twice_gives_the_same_run(runs: Path) -> None:
     assert [row["iteration"] for row in first] == ["1", "2", "3"]
     assert metrics(runs / "second") == first
     assert same_archives(archives(runs / "first"), archives(runs / "second"))
+
+
+def test_a_run_stepped_from_python_and_resumed_midway_equals_qdil_fit(
+    runs: Path, walker_demos: Path, tmp_path: Path
+) -> None:
+    overrides = [*LARGER, "--demos.path", str(walker_demos), "--qd.iterations", "3"]
+    with Experiment.from_recipe(RECIPE, overrides, seed=0, root=tmp_path, name="python") as run:
+        assert (run.iteration, run.finished) == (0, False)
+        for expected in (1, 2):
+            metrics_of_step = run.step()
+            # between steps: the iteration's metrics, the pyribs archive, the reward, θ_μ
+            assert run.iteration == expected and "qd/qd_score" in metrics_of_step
+            assert len(run.archive) > 0 and run.policy_mean.shape == (run.archive.solution_dim,)
+            assert run.reward_model.name == "mcwae_wgail+bonus"
+        run.checkpoint()
+    with Experiment.resume(tmp_path / "python") as again:  # a new object, from the folder
+        assert again.iteration == 2 and again.notes == [f"resuming {again.run_dir} at iteration 2"]
+        again.fit()
+        assert again.finished
+    assert metrics(tmp_path / "python") == metrics(runs / "second")
+    assert same_archives(archives(tmp_path / "python"), archives(runs / "second"))
 
 
 def test_a_resumed_run_equals_the_uninterrupted_one(runs: Path) -> None:

@@ -86,6 +86,7 @@ def test_fit_makes_the_run_directory_under_that_name(tmp_path: Path, monkeypatch
     import importlib
 
     fit_module = importlib.import_module("qdil.cli.fit")
+    experiment = importlib.import_module("qdil.experiment")
     seen = {}
 
     class Built(Exception):
@@ -96,7 +97,7 @@ def test_fit_makes_the_run_directory_under_that_name(tmp_path: Path, monkeypatch
         raise Built
 
     monkeypatch.chdir(tmp_path)
-    monkeypatch.setattr(fit_module, "build", build)
+    monkeypatch.setattr(experiment, "build_recipe", build)
     with pytest.raises(Built):
         fit_module.fit([FLAGSHIP, "--reward", "gail", "--bonus.enabled", "false"])
     assert seen == {"name": "walker_gail-seed0", "run_dir": Path("runs") / "walker_gail-seed0"}

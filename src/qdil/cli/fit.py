@@ -2,14 +2,11 @@
 
 from __future__ import annotations
 
-import contextlib
-import shutil
 import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, cast
 
 from qdil.cli.args import plain_text
-from qdil.files import CONFIG_NAME
 from qdil.rewards.names import rewrite_reward_flag
 
 # Only the standard library at import time (see qdil.cli): torch, Lightning and pyribs load
@@ -124,94 +121,40 @@ def parse_fit(argv: list[str]) -> tuple[Namespace, Path | None, str]:
 
 
 def fit(argv: list[str]) -> None:
-    """``qdil fit``: build the run, save its resolved recipe, loop, checkpoint."""
+    """``qdil fit``: parse, open the run folder, loop to the end (:class:`qdil.experiment`)."""
     help_request = _help_request(argv)
     if help_request is not None:
         fit_help(help_request)
-    import yaml
-
-    from qdil.config import finished
     from qdil.executors.base import ExecutorError
-    from qdil.files import atomic_write, remove_stale_temporaries
-    from qdil.provenance import record_start
-    from qdil.qd.checkpoint import (
-        CHECKPOINT,
-        config_differences,
-        load_checkpoint,
-        read_checkpoint,
-    )
-    from qdil.qd.loop import run_qd
+    from qdil.experiment import Experiment, RunFolder
+    from qdil.recipe_load import LoadedRecipe
     from qdil.rewards.base import NonFiniteRewardError
     from qdil.tracking import check_wandb_login
 
-    config, resume_dir, stem = parse_fit(argv)
-    parser = fit_parser()
-    name = config.name or f"{stem}-seed{config.seed}"
-    if resume_dir is not None:
-        run_dir = resume_dir
-    else:
-        run_dir = Path(config.logging.root) / name
-        if (run_dir / "checkpoints").exists() or (run_dir / "metrics.csv").exists():
-            raise SystemExit(
-                f"run directory {run_dir} already holds a run; continue it (or, without a "
-                f"checkpoint, start it over) with `qdil fit --resume {run_dir}`, or choose "
-                "another --name"
-            )
-    config.name = name
-    resolved = parser.dump(config, skip_unset=False)
-    state = None
-    if resume_dir is not None and (run_dir / CHECKPOINT).exists():
-        state = read_checkpoint(run_dir / CHECKPOINT)
-        _check_unchanged(state, yaml.safe_load(resolved), run_dir, config_differences)
-        if finished(config.qd, state["iteration"], state["env_steps"]):  # nothing to run or write
-            how = "--qd.iterations N continues it to N"
-            spent = ""
-            if config.qd.env_steps is not None:
-                how = "--qd.iterations N and --qd.env_steps N continue it"
-                spent = f", {state['env_steps']:,} env steps of a budget of {config.qd.env_steps:,}"
-            print(
-                f"{run_dir} is finished: iteration {state['iteration']} of "
-                f"{config.qd.iterations}{spent}; nothing to do ({how})",
-                file=sys.stderr,
-            )
-            return
+    folder = RunFolder.of(LoadedRecipe(*parse_fit(argv)))
+    run_dir, config = folder.run_dir, folder.loaded.config
+    if folder.finished:  # nothing to run or write
+        state = folder.state or {}
+        how = "--qd.iterations N continues it to N"
+        spent = ""
+        if config.qd.env_steps is not None:
+            how = "--qd.iterations N and --qd.env_steps N continue it"
+            spent = f", {state['env_steps']:,} env steps of a budget of {config.qd.env_steps:,}"
+        print(
+            f"{run_dir} is finished: iteration {state['iteration']} of "
+            f"{config.qd.iterations}{spent}; nothing to do ({how})",
+            file=sys.stderr,
+        )
+        return
     problem = check_wandb_login(config.logging.wandb)  # before the run writes anything
     if problem is not None:
         raise SystemExit(f"qdil fit: error: {problem}")
-    for path in remove_stale_temporaries(run_dir, run_dir / CHECKPOINT.parent):
-        print(f"removed {path}, left by a killed write", file=sys.stderr)
-    if resume_dir is not None and state is None:
-        print(
-            f"{run_dir} has no checkpoint (the run stopped before its first one); "
-            f"starting it over from its {CONFIG_NAME}",
-            file=sys.stderr,
-        )
-    fresh = not run_dir.exists()
-    made = [folder for folder in run_dir.absolute().parents if not folder.exists()]
-    run_dir.mkdir(parents=True, exist_ok=True)
+    experiment = Experiment.open(folder)
+    for note in experiment.notes:
+        print(note if not note.startswith("warning") else f"qdil fit: {note}", file=sys.stderr)
+    run = experiment.run
     try:
-        atomic_write(run_dir / CONFIG_NAME, lambda file: file.write(resolved.encode()))
-        init = parser.instantiate(config)
-        run = build(init, name, run_dir, resolved, resume=state is not None)
-    except BaseException:
-        if fresh:  # a run that never started leaves no directory behind, nor its root
-            shutil.rmtree(run_dir, ignore_errors=True)
-            for folder in made:  # innermost first; one another process wrote into stays
-                with contextlib.suppress(OSError):
-                    folder.rmdir()
-        raise
-    if state is not None:
-        load_checkpoint(run, state)
-        del state  # the checkpoint's bytes are restored into the run; free them
-        print(f"resuming {run_dir} at iteration {run.state.iteration}", file=sys.stderr)
-    tracker = cast("Tracker", run.tracker)  # build_run's; the loop sees only its RunTracker face
-    if tracker.csv.path.exists():  # rows logged after the checkpoint (all, if none)
-        tracker.csv.truncate(run.state.iteration)
-    note = record_start(run_dir, run.state.iteration)
-    if note is not None:
-        print(f"qdil fit: warning: {run_dir} is {note}", file=sys.stderr)
-    try:
-        run_qd(run)
+        experiment.fit()
     except NonFiniteRewardError as error:
         raise SystemExit(
             f"qdil fit: error: {error}\nAfter the fix, `qdil fit --resume {run_dir}` continues "
@@ -224,59 +167,21 @@ def fit(argv: list[str]) -> None:
         ) from None
     finally:
         run.executor.close()
+    tracker = cast("Tracker", run.tracker)
     if tracker.wants_videos:
         tracker.log_videos(_render_for_wandb(run_dir, tracker.logging.videos), run.state.iteration)
     tracker.finish(run)
     print(f"run directory: {run_dir}", file=sys.stderr)
 
 
-def _check_unchanged(
-    state: dict[str, Any], resolved: dict[str, Any], run_dir: Path, differences: Any
-) -> None:
-    """Refuse a resume whose recipe differs from the one stored with its checkpoint.
-
-    Raises:
-        SystemExit: naming the keys that differ and what to do.
-    """
-    from qdil.upgrades import upgraded
-
-    stored = state.get("config")
-    if stored is None:  # written before checkpoints stored their recipe
-        return
-    changed = differences(upgraded(stored), resolved)
-    if changed:
-        lines = "\n".join(f"  {line}" for line in changed)
-        raise SystemExit(
-            f"qdil fit: error: {run_dir / CONFIG_NAME} no longer matches the recipe its "
-            f"checkpoint was made with (checkpoint -> now):\n{lines}\n"
-            "Restore these keys to resume, or start a new run from the edited file with "
-            f"`qdil fit {run_dir / CONFIG_NAME} --name NEW_NAME`. Only qd.iterations, "
-            "qd.env_steps, env.num_threads, executor.* and logging.* may change on resume."
-        )
-
-
 def build(init: Namespace, name: str, run_dir: Path, resolved: str, *, resume: bool) -> Run:
-    """The run of an instantiated recipe (envs, reward model, scheduler, trackers)."""
-    import yaml
+    """The run of an instantiated recipe (:func:`qdil.experiment.build_recipe`).
 
-    from qdil.run import build_run
+    ``resume``: a checkpoint will be restored into it (its reward pretraining is skipped).
+    """
+    from qdil.experiment import build_recipe
 
-    return build_run(
-        name=name,
-        run_dir=run_dir,
-        seed=init.seed,
-        env=init.env,
-        policy=init.policy,
-        rl=init.rl,
-        reward=init.reward,
-        bonus=init.bonus,
-        demos=init.demos,
-        qd=init.qd,
-        logging=init.logging,
-        config=yaml.safe_load(resolved),
-        resume=resume,
-        executor=init.executor,
-    )
+    return build_recipe(init, name, run_dir, resolved, resume=resume)
 
 
 def _render_for_wandb(run_dir: Path, count: int) -> list:

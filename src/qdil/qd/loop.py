@@ -359,18 +359,32 @@ def _checkpoint_due(run: Run, seconds_since_save: float) -> bool:
     return minutes > 0 and seconds_since_save >= 60.0 * minutes
 
 
+def next_iteration(run: Run, saved: float) -> tuple[dict[str, float], float]:
+    """One QD iteration of ``run``, logged, and a checkpoint when one is due.
+
+    Args:
+        run: the run.
+        saved: ``time.monotonic()`` at the last checkpoint (or the start).
+
+    Returns:
+        The iteration's metrics and the time of the last checkpoint.
+    """
+    run.state.iteration += 1
+    metrics = qd_iteration(run)
+    run.tracker.log(metrics, run.state.iteration, run)
+    if _checkpoint_due(run, time.monotonic() - saved):
+        save_checkpoint(run)
+        saved = time.monotonic()
+    return metrics, saved
+
+
 def run_qd(run: Run) -> None:
     """Run iterations until ``qd.iterations`` or the env-step budget, log and checkpoint."""
     progress = run.tracker.progress(run.state.iteration, run.qd.iterations)
     saved = time.monotonic()
     try:
         while not finished(run.qd, run.state.iteration, run.state.env_steps):
-            run.state.iteration += 1
-            metrics = qd_iteration(run)
-            run.tracker.log(metrics, run.state.iteration, run)
+            metrics, saved = next_iteration(run, saved)
             progress.update(metrics)
-            if _checkpoint_due(run, time.monotonic() - saved):
-                save_checkpoint(run)
-                saved = time.monotonic()
     finally:
         progress.close()
