@@ -1,6 +1,13 @@
-"""qdil: quality-diversity imitation learning (WQDIL on PPGA) for MuJoCo locomotion."""
+"""qdil: quality-diversity imitation learning (WQDIL on PPGA) for MuJoCo locomotion.
+
+``qdil.Experiment`` (a run driven from Python) and ``qdil.load_recipe`` load on first use
+(PEP 562): ``import qdil`` imports no torch.
+"""
 
 from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
 
 from qdil import numerics
 
@@ -9,6 +16,25 @@ numerics.configure()
 
 from qdil.envs import register_envs  # noqa: E402
 
+if TYPE_CHECKING:
+    from qdil.experiment import Experiment
+    from qdil.recipe_load import RecipeError, load_recipe
+
 __version__ = "0.1.0"
+__all__ = ["Experiment", "RecipeError", "__version__", "load_recipe"]
+
+_HOMES = {
+    "Experiment": "qdil.experiment",
+    "RecipeError": "qdil.recipe_load",
+    "load_recipe": "qdil.recipe_load",
+}
 
 register_envs()
+
+
+def __getattr__(name: str) -> Any:
+    if name not in _HOMES:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(_HOMES[name]), name)
+    globals()[name] = value  # looked up once
+    return value
