@@ -195,3 +195,13 @@ def test_no_floor_imports_from_a_floor_above() -> None:
         if up:
             reaching_up[name] = up
     assert reaching_up == {}
+
+
+def test_the_package_map_names_the_floors_as_they_are() -> None:
+    """docs/concepts/package.md's table lists each floor's modules, bottom up, as FLOORS."""
+    import re
+
+    page = (SRC.parent / "docs" / "concepts" / "package.md").read_text()
+    rows = [line for line in page.splitlines() if re.match(r"\| \d\. ", line)]
+    named = [set(re.findall(r"`(qdil[\w.]*)`", row.split("|")[2])) for row in rows]
+    assert named == [set(floor) for floor in FLOORS]
