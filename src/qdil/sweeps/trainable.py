@@ -11,7 +11,6 @@ leaves no run going on alone.
 from __future__ import annotations
 
 import contextlib
-import csv
 import ctypes
 import fcntl
 import json
@@ -26,6 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from qdil.files import CONFIG_NAME
+from qdil.sweeps.follow import MetricsFollower, last_iteration
 from qdil.sweeps.trials import Trial
 
 LOCKS = ".locks"
@@ -137,23 +137,19 @@ def _cluster_address() -> str | None:
 
 
 def follow(
-    metrics: Path, seen: int, report: Callable[[dict[str, Any]], None], metric: str | None = None
-) -> int:
-    """Report the rows of ``metrics`` after the first ``seen``; returns the rows read.
+    rows: MetricsFollower, report: Callable[[dict[str, Any]], None], metric: str | None = None
+) -> None:
+    """Report the rows appended to a trial's ``metrics.csv`` since the last look.
 
     With a search's ``metric``, each row also reports the training archive's value of it
     as ``objective`` (what early stopping compares).
     """
-    if not metrics.is_file():
-        return seen
-    with open(metrics, newline="") as file:
-        rows = list(csv.DictReader(file))
-    for row in rows[seen:]:
+    for row in rows.rows():
         values = {name: _number(row.get(column)) for column, name in REPORTED.items()}
         if metric is not None:
             values["objective"] = _number(row.get(f"qd/{metric}"))
-        report({"iteration_qd": int(float(row["iteration"])), "run": metrics.parent.name, **values})
-    return max(seen, len(rows))
+        run = rows.path.parent.name
+        report({"iteration_qd": int(float(row["iteration"])), "run": run, **values})
 
 
 def _number(value: str | None) -> float:
@@ -202,13 +198,14 @@ def run_trial(
     with guard(trial) as lock:
         args = ["fit", *trial.fit_args(), "--env.num_threads", str(threads)]
         # rows a resumed run keeps are not reported again, but the last one is (the table)
-        seen = max(0, _rows(metrics) - 1) if (trial.run_dir / CONFIG_NAME).is_file() else 0
+        resumed = (trial.run_dir / CONFIG_NAME).is_file()
+        rows = MetricsFollower(metrics, max(0, last_iteration(metrics) - 1) if resumed else 0)
         work = partial(run_command, args, lock, threads, log, trial.cwd)
         with _in_background(work) as finished:
             while not finished():
                 time.sleep(every)
-                seen = follow(metrics, seen, report, metric)
-        seen = follow(metrics, seen, report, metric)
+                follow(rows, report, metric)
+        follow(rows, report, metric)
         if episodes and not rescored(trial.run_dir, episodes):
             command = ["eval", str(trial.run_dir), "--episodes", str(episodes)]
             command += ["--num-threads", str(threads)]
@@ -222,13 +219,6 @@ def _rescored(run_dir: Path, metric: str) -> dict[str, Any]:
     objective = float(summary["metrics"][metric])
     iteration = summary["iteration"]
     return {"rescored": 1, "objective": objective, "iteration_qd": iteration, "run": run_dir.name}
-
-
-def _rows(metrics: Path) -> int:
-    if not metrics.is_file():
-        return 0
-    with open(metrics, newline="") as file:
-        return sum(1 for _ in csv.DictReader(file))
 
 
 @contextlib.contextmanager
