@@ -33,7 +33,7 @@ def reading(run: Path, at: list[int]) -> str:
 
     def at_each(key: str, digits: int) -> str:
         return " / ".join(
-            f"{float(value[i][key]):.{digits}f}" if i in value and value[i][key] else "–"
+            f"{float(value[i][key]):.{digits}f}" if i in value and value[i].get(key) else "–"
             for i in at
         )
 
