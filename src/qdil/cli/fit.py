@@ -14,6 +14,7 @@ from qdil.rewards.names import rewrite_reward_flag
 if TYPE_CHECKING:
     from jsonargparse import ArgumentParser, Namespace
 
+    from qdil.recipe_load import LoadedRecipe
     from qdil.run import Run
     from qdil.tracking import Tracker
 
@@ -95,8 +96,8 @@ def fit_help(request: list[str]) -> None:
     raise SystemExit(0)  # not reached: help actions exit
 
 
-def parse_fit(argv: list[str]) -> tuple[Namespace, Path | None, str]:
-    """Parse ``qdil fit`` arguments; returns (config, run dir to resume or None, name stem).
+def _load(argv: list[str]) -> LoadedRecipe:
+    """The checked recipe of ``qdil fit``'s arguments.
 
     :func:`qdil.recipe_load.load_recipe` on the command line's recipe or ``--resume`` run.
 
@@ -114,9 +115,18 @@ def parse_fit(argv: list[str]) -> tuple[Namespace, Path | None, str]:
     else:
         raise SystemExit(f"usage: {FIT_USAGE}\n(qdil fit --help lists the recipe's keys)")
     try:
-        loaded = load_recipe(source, overrides, resume=resume)
+        return load_recipe(source, overrides, resume=resume)
     except RecipeError as error:
         raise SystemExit(str(error)) from None
+
+
+def parse_fit(argv: list[str]) -> tuple[Namespace, Path | None, str]:
+    """Parse ``qdil fit`` arguments; returns (config, run dir to resume or None, name stem).
+
+    Raises:
+        SystemExit: with a message naming the recipe key on a bad recipe.
+    """
+    loaded = _load(argv)
     return loaded.config, loaded.resume_dir, loaded.stem
 
 
@@ -127,11 +137,10 @@ def fit(argv: list[str]) -> None:
         fit_help(help_request)
     from qdil.executors.base import ExecutorError
     from qdil.experiment import Experiment, RunFolder
-    from qdil.recipe_load import LoadedRecipe
     from qdil.rewards.base import NonFiniteRewardError
     from qdil.tracking import check_wandb_login
 
-    folder = RunFolder.of(LoadedRecipe(*parse_fit(argv)))
+    folder = RunFolder.of(_load(argv))
     run_dir, config = folder.run_dir, folder.loaded.config
     if folder.finished:  # nothing to run or write
         state = folder.state or {}
