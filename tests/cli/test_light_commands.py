@@ -51,6 +51,17 @@ def test_help_and_version_load_none_of_the_heavy_packages(tmp_path: Path) -> Non
     assert loaded(light, tmp_path).isdisjoint(HEAVY)
 
 
+def test_listing_the_reward_models_loads_none_of_the_heavy_packages(tmp_path: Path) -> None:
+    """``qdil rewards list`` reads the models' source (built-ins, entry points, ./plugins)."""
+    (tmp_path / "plugins").mkdir()
+    (tmp_path / "plugins" / "local.py").write_text(
+        "from qdil.rewards import RewardModel, register_reward\n\n\n"
+        '@register_reward("local")\nclass Local(RewardModel):\n    """A local reward."""\n'
+    )
+    modules = loaded([["rewards", "list"]], tmp_path)
+    assert modules.isdisjoint(HEAVY), modules & set(HEAVY)
+
+
 def test_version_prints_the_package_version(capsys) -> None:
     from qdil import __version__
 

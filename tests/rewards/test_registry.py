@@ -9,6 +9,8 @@ import sys
 import pytest
 
 from qdil.rewards import get_reward, list_rewards, registry
+from qdil.rewards.listing import ListedReward, read_listing
+from tests.commands import cli
 
 BUILTINS = {
     "gail",
@@ -159,3 +161,82 @@ def test_rewards_list_command_prints_names_descriptions_and_sources(tmp_path) ->
     assert set(lines) >= BUILTINS
     assert "[qdil (built-in)]" in lines["mcwae_wgail"]
     assert "WQDIL" in lines["mcwae_wgail"]
+
+
+def _imported(clean_registry) -> list[ListedReward]:
+    clean_registry.discover(force=True)
+    return [ListedReward(e.name, e.description, e.source) for e in clean_registry.list_rewards()]
+
+
+def _printed(entries: list[ListedReward]) -> str:
+    width = max(len(entry.name) for entry in entries)
+    return "".join(f"{e.name:<{width}}  {e.description}  [{e.source}]\n" for e in entries)
+
+
+def test_the_listing_read_from_source_equals_the_imported_registry(
+    clean_registry, tmp_path, monkeypatch, capsys
+) -> None:
+    """Built-ins, installed entry points and a ./plugins module, read without an import."""
+    (tmp_path / "plugins").mkdir()
+    (tmp_path / "plugins" / "here.py").write_text(PLUGIN.format(name="here"))
+    monkeypatch.chdir(tmp_path)
+    listed = read_listing()
+    assert listed == _imported(clean_registry)
+    assert {"here", *BUILTINS} <= {entry.name for entry in listed}
+    assert cli(["rewards", "list"], capsys)[:2] == (0, _printed(listed))
+
+
+INHERITING = """
+from qdil.rewards.builtin import GAIL
+from qdil.rewards import register_reward
+
+@register_reward("my_gail")
+class MyGAIL(GAIL):
+    \"\"\"GAIL under another name.\"\"\"
+"""
+
+
+@pytest.mark.parametrize("kind", ["package", "inherited description", "taken name"])
+def test_where_the_source_leaves_a_doubt_the_listing_imports(
+    kind, clean_registry, tmp_path, monkeypatch, capsys
+) -> None:
+    """A plugin package, a description from another model, a name taken twice: the command
+    imports and prints what the registry holds (or its error)."""
+    (tmp_path / "plugins").mkdir()
+    if kind == "package":
+        (tmp_path / "plugins" / "pack").mkdir()
+        (tmp_path / "plugins" / "pack" / "__init__.py").write_text(PLUGIN.format(name="packed"))
+    elif kind == "inherited description":
+        (tmp_path / "plugins" / "mine.py").write_text(INHERITING)
+    else:
+        (tmp_path / "plugins" / "again.py").write_text(PLUGIN.format(name="gail"))
+    monkeypatch.chdir(tmp_path)
+    assert read_listing() is None
+    code, out, err = cli(["rewards", "list"], capsys)
+    if kind == "taken name":
+        assert code == 1
+        assert "reward name 'gail' is registered twice" in err
+        return
+    clean_registry._discovered = False  # the command discovered into the fixture's registry
+    assert (code, out) == (0, _printed(_imported(clean_registry)))
+    if kind == "inherited description":
+        assert "my_gail      GAIL (Ho & Ermon 2016)" in out
+    else:
+        assert f"[local plugin {tmp_path / 'plugins' / 'pack'}]" in out
+
+
+def test_check_imports_the_models_and_reports_a_plugin_that_fails(
+    clean_registry, tmp_path, monkeypatch, capsys
+) -> None:
+    """The listing reads source, so a missing dependency shows only with ``--check``."""
+    (tmp_path / "plugins").mkdir()
+    broken = tmp_path / "plugins" / "broken.py"
+    broken.write_text("import not_installed_anywhere\n" + PLUGIN.format(name="broken"))
+    monkeypatch.chdir(tmp_path)
+    code, out, _ = cli(["rewards", "list"], capsys)
+    assert code == 0
+    assert f"broken       A local test reward.  [local plugin {broken}]" in out.splitlines()
+    code, out, err = cli(["rewards", "list", "--check"], capsys)
+    assert code == 1
+    assert f"local reward plugin {broken} failed to import" in err
+    assert "No module named 'not_installed_anywhere'" in err

@@ -13,10 +13,11 @@ the name is declared; ``None`` where the source does not say (the caller then im
 from __future__ import annotations
 
 import ast
-import importlib.util
 from functools import cache
 from pathlib import Path
 from typing import Any
+
+from qdil.rewards.source import is_register_call, module_source
 
 
 def declared_name(class_path: str) -> str | None:
@@ -36,7 +37,7 @@ def declared_name(class_path: str) -> str | None:
         module, _, qualname = class_path.rpartition(".")
         if not module:
             return None
-        origin = _source(module)
+        origin = module_source(module)
         if origin is None:
             return None
         names, imported = _declared(origin)
@@ -46,35 +47,6 @@ def declared_name(class_path: str) -> str | None:
             return None
         class_path = imported[qualname]
     return None
-
-
-def _source(module: str) -> str | None:
-    """The ``.py`` file of ``module``, found without importing it or its parent packages.
-
-    ``importlib.util.find_spec`` of a submodule imports its parents, and a reward package's
-    ``__init__`` imports its models.
-    """
-    top, *rest = module.split(".")
-    try:
-        spec = importlib.util.find_spec(top)
-    except (ImportError, ValueError):
-        return None
-    origin = getattr(spec, "origin", None)
-    folders = list(getattr(spec, "submodule_search_locations", None) or [])
-    for part in rest:
-        found = None
-        for folder in folders:
-            if (Path(folder) / part / "__init__.py").is_file():
-                found = Path(folder) / part / "__init__.py"
-                break
-            if (Path(folder) / f"{part}.py").is_file():
-                found = Path(folder) / f"{part}.py"
-                break
-        if found is None:
-            return None
-        origin = str(found)
-        folders = [str(found.parent)] if found.name == "__init__.py" else []
-    return origin if origin and origin.endswith(".py") else None
 
 
 @cache
@@ -97,23 +69,9 @@ def _declared(path: str) -> tuple[dict[str, str], dict[str, str]]:
         if not isinstance(node, ast.ClassDef):
             continue
         for decorator in node.decorator_list:
-            if _is_register_call(decorator):
+            if is_register_call(decorator):
                 names[node.name] = decorator.args[0].value
     return names, imported
-
-
-def _is_register_call(node: ast.expr) -> bool:
-    """Whether ``node`` is ``register_reward("name")`` (or ``module.register_reward(...)``)."""
-    if not isinstance(node, ast.Call) or len(node.args) != 1 or node.keywords:
-        return False
-    func = node.func
-    called = func.id if isinstance(func, ast.Name) else getattr(func, "attr", None)
-    argument = node.args[0]
-    return (
-        called == "register_reward"
-        and isinstance(argument, ast.Constant)
-        and isinstance(argument.value, str)
-    )
 
 
 def named_reward(name: str) -> type:

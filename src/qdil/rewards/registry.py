@@ -13,16 +13,30 @@ import importlib
 import importlib.metadata
 import importlib.util
 import inspect
-import os
 import sys
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
 from qdil.rewards.base import RewardModel
+from qdil.rewards.listing import (
+    BUILT_IN,
+    ENTRY_POINT_GROUP,
+    LOCAL_PACKAGE,
+    plugin_folders,
+    plugin_modules,
+)
 
-ENTRY_POINT_GROUP = "qdil.rewards"
-LOCAL_PACKAGE = "qdil_local_plugins"
+__all__ = [
+    "ENTRY_POINT_GROUP",
+    "LOCAL_PACKAGE",
+    "RegisteredReward",
+    "discover",
+    "get_reward",
+    "list_rewards",
+    "plugin_folders",
+    "register_reward",
+]
 
 
 @dataclass(frozen=True)
@@ -41,7 +55,7 @@ class RegisteredReward:
 
 
 _REGISTRY: dict[str, RegisteredReward] = {}
-_current_source = "qdil (built-in)"
+_current_source = BUILT_IN
 _discovered = False
 
 
@@ -66,7 +80,7 @@ def register_reward(name: str) -> Callable[[type[RewardModel]], type[RewardModel
             )
         cls.name = name
         source = _current_source
-        if source == "qdil (built-in)" and not cls.__module__.startswith("qdil."):
+        if source == BUILT_IN and not cls.__module__.startswith("qdil."):
             source = f"module {cls.__module__}"  # registered by a plain import
         _REGISTRY[name] = RegisteredReward(name, cls, source)
         return cls
@@ -91,7 +105,7 @@ def _load_entry_points() -> None:
                 f"{dist} failed to import: {error}"
             ) from error
         finally:
-            _current_source = "qdil (built-in)"
+            _current_source = BUILT_IN
         source = f"entry point {entry_point.name} ({dist})"
         module = loaded.__module__ if inspect.isclass(loaded) else loaded.__name__
         if inspect.isclass(loaded):
@@ -103,38 +117,11 @@ def _load_entry_points() -> None:
             if loaded.name not in _REGISTRY or _REGISTRY[loaded.name].cls is not loaded:
                 _current_source = source
                 register_reward(loaded.name or entry_point.name)(loaded)
-                _current_source = "qdil (built-in)"
+                _current_source = BUILT_IN
         # the package may have been imported (and registered) before discovery ran
         for name, entry in list(_REGISTRY.items()):
             if entry.cls.__module__ == module and entry.source.startswith("module "):
                 _REGISTRY[name] = RegisteredReward(name, entry.cls, source)
-
-
-def plugin_folders() -> list[Path]:
-    """Local plugin folders: ``./plugins``, then those of ``$QDIL_PLUGIN_PATH``.
-
-    ``$QDIL_PLUGIN_PATH`` is ``os.pathsep``-separated (``:`` on Linux and macOS, ``;`` on
-    Windows); its folders are scanned as well as ``./plugins``, which may be absent.
-
-    Raises:
-        FileNotFoundError: if a folder on ``$QDIL_PLUGIN_PATH`` does not exist (or is a file):
-            a mistyped path would otherwise leave its plugins out without a word.
-    """
-    folders = [Path.cwd() / "plugins"]
-    for entry in os.environ.get("QDIL_PLUGIN_PATH", "").split(os.pathsep):
-        if not entry:
-            continue
-        folder = Path(entry).expanduser().absolute()
-        if not folder.is_dir():
-            what = "is a file, not a folder" if folder.exists() else "does not exist"
-            raise FileNotFoundError(
-                f"QDIL_PLUGIN_PATH names the plugin folder {folder}, which {what}; create "
-                "it, correct the path, or take it out of QDIL_PLUGIN_PATH (./plugins is "
-                "scanned without it)"
-            )
-        if all(folder.resolve() != known.resolve() for known in folders):
-            folders.append(folder)
-    return folders
 
 
 def _load_folder(folder: Path) -> None:
@@ -150,12 +137,8 @@ def _load_folder(folder: Path) -> None:
         sys.modules[LOCAL_PACKAGE] = package
     if str(folder) not in package.__path__:
         package.__path__.append(str(folder))
-    for path in sorted(folder.iterdir()):
-        is_module = path.suffix == ".py" and path.stem.isidentifier() and path.stem != "__init__"
-        is_package = path.is_dir() and (path / "__init__.py").exists() and path.name.isidentifier()
-        if not (is_module or is_package):
-            continue
-        name = f"{LOCAL_PACKAGE}.{path.stem if is_module else path.name}"
+    for path, is_package in plugin_modules(folder):
+        name = f"{LOCAL_PACKAGE}.{path.name if is_package else path.stem}"
         if name in sys.modules:
             continue
         _current_source = f"local plugin {path}"
@@ -164,7 +147,7 @@ def _load_folder(folder: Path) -> None:
         except Exception as error:
             raise ImportError(f"local reward plugin {path} failed to import: {error}") from error
         finally:
-            _current_source = "qdil (built-in)"
+            _current_source = BUILT_IN
 
 
 def discover(force: bool = False) -> None:
