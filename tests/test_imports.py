@@ -159,6 +159,7 @@ FLOORS = (
     (
         "qdil.recipe",
         "qdil.recipe_load",
+        "qdil.recipe_schema",
         "qdil.experiment",
         "qdil.run_names",
         "qdil.run",

@@ -52,7 +52,10 @@ def recipe_parser(
 
     from qdil.recipe import recipe
 
-    parser = (parser_class or ArgumentParser)(default_env=False, exit_on_error=False, **kwargs)
+    # no abbreviations: ``--env.num_env 3`` must not set ``env.num_envs``
+    parser = (parser_class or ArgumentParser)(
+        default_env=False, exit_on_error=False, allow_abbrev=False, **kwargs
+    )
     parser.add_argument("--config", action=ActionConfigFile, help="the recipe (YAML)")
     parser.add_function_arguments(recipe, as_positional=False)
     return parser
@@ -78,11 +81,9 @@ def load_recipe(
     """
     import yaml
 
-    from qdil.recipe import check_values, class_path_problem
-    from qdil.rewards import discover
+    from qdil.recipe_schema import unknown_keys
     from qdil.upgrades import upgraded
 
-    discover()
     overrides = list(overrides)
     resume_dir = Path(source) if resume else None
     if resume_dir is not None:
@@ -110,6 +111,13 @@ def load_recipe(
     if not isinstance(content, dict):
         raise RecipeError(f"recipe {base} must be a mapping of sections (env, reward, rl, qd, ...)")
     content = upgraded(content)  # a run's config.yaml from before a class or key moved
+    problems = unknown_keys(content, overrides)  # before torch, pyribs and Lightning load
+    if problems:
+        raise RecipeError("\n".join(f"recipe {base}: {problem}" for problem in problems))
+    from qdil.recipe import check_values, class_path_problem
+    from qdil.rewards import discover
+
+    discover()
     try:
         content = drop_form_on_switch(resolve_reward_names(content), overrides)
         overrides = rewrite_reward_flag(overrides)

@@ -52,6 +52,8 @@ def test_smoke_fit_writes_config_metrics_and_checkpoint(tmp_path: Path, monkeypa
         (["--qd.itrations", "5"], "itrations"),
         (["--reward", "gial"], "unknown reward model 'gial'; registered: "),
         (["--env.task", "Walker3d-v5"], "known tasks: Walker2d-v5"),
+        (["--env.num_env", "3"], "unknown key 'env.num_env' in --env.num_env; did you mean"),
+        (["--qd.archive.typ", "cvt"], "unrecognized arguments: --qd.archive.typ"),  # no prefix
     ],
 )
 def test_bad_recipes_name_the_key(

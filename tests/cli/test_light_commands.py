@@ -51,6 +51,15 @@ def test_help_and_version_load_none_of_the_heavy_packages(tmp_path: Path) -> Non
     assert loaded(light, tmp_path).isdisjoint(HEAVY)
 
 
+def test_a_misspelt_recipe_key_is_refused_before_the_heavy_packages(tmp_path: Path) -> None:
+    """The recipe's sections and keys are read from source (qdil.recipe_schema)."""
+    recipe = tmp_path / "typo.yaml"
+    recipe.write_text(SMOKE.read_text().replace("num_envs:", "num_env:"))
+    modules = loaded([["fit", str(recipe)], ["fit", str(SMOKE), "--qd.iteratons", "1"]], tmp_path)
+    assert modules.isdisjoint(HEAVY), modules & set(HEAVY)
+    assert not (tmp_path / "runs").exists()
+
+
 def test_listing_the_reward_models_loads_none_of_the_heavy_packages(tmp_path: Path) -> None:
     """``qdil rewards list`` reads the models' source (built-ins, entry points, ./plugins)."""
     (tmp_path / "plugins").mkdir()

@@ -135,12 +135,13 @@ def fit(argv: list[str]) -> None:
     help_request = _help_request(argv)
     if help_request is not None:
         fit_help(help_request)
+    loaded = _load(argv)  # a misspelt key is refused before the run's packages load
     from qdil.executors.base import ExecutorError
     from qdil.experiment import Experiment, RunFolder
     from qdil.rewards.base import NonFiniteRewardError
     from qdil.tracking import check_wandb_login
 
-    folder = RunFolder.of(_load(argv))
+    folder = RunFolder.of(loaded)
     run_dir, config = folder.run_dir, folder.loaded.config
     if folder.finished:  # nothing to run or write
         state = folder.state or {}
