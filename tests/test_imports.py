@@ -161,6 +161,7 @@ FLOORS = (
         "qdil.recipe_load",
         "qdil.recipe_schema",
         "qdil.experiment",
+        "qdil.finished_run",
         "qdil.run_names",
         "qdil.run",
         "qdil.evaluation",

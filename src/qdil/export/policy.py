@@ -67,3 +67,17 @@ class GaitPolicy(nn.Module):
             if i < last:
                 x = torch.tanh(x)
         return self.low + (x.clamp(-1.0, 1.0) + 1.0) * self.half_range
+
+    def act(self, obs: np.ndarray) -> np.ndarray:
+        """The action for a raw observation, in numpy.
+
+        Args:
+            obs: (obs_dim,) one observation, or (B, obs_dim) several.
+
+        Returns:
+            (A,) or (B, A) float32 actions within the task's bounds.
+        """
+        batch = torch.as_tensor(np.asarray(obs, dtype=np.float32))
+        with torch.no_grad():
+            actions = self(batch[None] if batch.ndim == 1 else batch).numpy()
+        return actions[0] if batch.ndim == 1 else actions
