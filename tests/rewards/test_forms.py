@@ -12,7 +12,7 @@ from qdil.rewards.builtin.airl import AIRL
 from qdil.rewards.builtin.gail import GAIL
 from qdil.rewards.builtin.maxent_irl import MaxEntIRL
 from qdil.rewards.builtin.wae import MCWAEWGAIL, WAEGAIL
-from qdil.rewards.contract import ACT, OBS, K, synthetic, train
+from qdil.rewards.contract import ACT, OBS, K, demos_of, synthetic, train
 from qdil.rewards.forms import FORMS, ScoreStats, get_form
 from qdil.upgrades import upgraded
 
@@ -118,6 +118,26 @@ def test_steps_per_update_sets_the_critics_cadence() -> None:
         assert torch.equal(value, by_steps.state_dict()[key]), key
     with pytest.raises(ValueError, match="steps_per_update must be positive"):
         GAIL(OBS, ACT, K, steps_per_update=0)
+
+
+@pytest.mark.parametrize("cls", [GAIL, AIRL, MaxEntIRL, WAEGAIL, MCWAEWGAIL])
+def test_feature_clip_bounds_the_standardised_inputs_of_every_adversarial_model(cls) -> None:
+    """A feature the demonstrations hold constant standardises to thousands when it moves
+    (a contact force on a fallen body); the clip holds it at the bound, as obs_clip does."""
+    expert, policy = synthetic(0.0, 64, seed=1), synthetic(0.0, 64, seed=2)
+    expert.obs[:, 0] = 0.5  # constant in the demonstrations: its std floors at 1e-3
+    policy.obs[:5, 0] = 3.0  # ... and a policy leaves it
+    plain, clipped = cls(OBS, ACT, K), cls(OBS, ACT, K, feature_clip=10.0)
+    for model in (plain, clipped):
+        model.setup(demos_of(expert))
+    free, bounded = plain.features(policy), clipped.features(policy)
+    assert float(free[:5, 0].min()) > 2000.0
+    assert torch.equal(bounded[:5, 0], torch.full((5,), 10.0))
+    inside = free.abs() <= 10.0  # everything within the bound is untouched
+    assert torch.equal(bounded[inside], free[inside])
+    assert float(bounded[:, : OBS + ACT].abs().max()) <= 10.0
+    with pytest.raises(ValueError, match="feature_clip must be > 0 or null, got 0"):
+        cls(OBS, ACT, K, feature_clip=0)
 
 
 def test_older_recipes_name_their_forms_as_today() -> None:

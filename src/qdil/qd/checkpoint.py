@@ -39,6 +39,7 @@ IMPLICIT_KEYS = {
     "reward.init_args.absorbing": None,
     "reward.init_args.reward_form": None,
     "reward.init_args.steps_per_update": None,
+    "reward.init_args.feature_clip": None,
     "reward.init_args.min_gap": 1.0,
     "reward.init_args.calibration_samples": 8192,
     "reward.init_args.score_type": "f",

@@ -45,6 +45,10 @@ class AdversarialReward(RewardModel):
         action_dim: action size.
         num_measures: k.
         use_measures: condition on δ(s): x = (s, a, δ(s)) (the "mC" variants).
+        feature_clip: bound of the standardised observations and actions in x, as the
+            policy clips its own (``policy.obs_clip``). Features the demonstrations hold
+            constant (std floored at 1e-3: Humanoid's contact forces on every body but the
+            feet) standardise to thousands when a policy falls; ``None``: unbounded.
         learning_rate: Adam learning rate (the paper: 3e-4).
         batch_size: expert (and policy) transitions per gradient step.
         epochs: passes over the expert transitions per QD iteration (the paper: 1).
@@ -84,6 +88,7 @@ class AdversarialReward(RewardModel):
         num_measures: int,
         *,
         use_measures: bool = False,
+        feature_clip: float | None = None,
         learning_rate: float = 3e-4,
         batch_size: int = 200,
         epochs: int = 1,
@@ -102,6 +107,8 @@ class AdversarialReward(RewardModel):
             raise ValueError(f"{name}: steps_per_update must be positive or null")
         if gp_weight < 0:
             raise ValueError(f"{name}: gp_weight must be >= 0, got {gp_weight}")
+        if feature_clip is not None and not feature_clip > 0:
+            raise ValueError(f"{name}: feature_clip must be > 0 or null, got {feature_clip}")
         if min_gap <= 0:
             raise ValueError(f"{name}: min_gap must be > 0, got {min_gap}")
         if calibration_samples < 1:
@@ -123,6 +130,7 @@ class AdversarialReward(RewardModel):
                 "(sigmoid, log1-d, calibrated, calibrated_sigmoid, standardized, logd)"
             )
         self.use_measures = use_measures
+        self.feature_clip = feature_clip
         self.learning_rate = learning_rate
         self.batch_size = batch_size
         self.epochs = epochs
@@ -152,6 +160,8 @@ class AdversarialReward(RewardModel):
     def features(self, batch: TransitionBatch) -> torch.Tensor:
         """(B, input_dim) x = (s, a[, δ(s)][, absorbing]), standardised where continuous."""
         parts = [self.normalize_obs(batch.obs), self.normalize_actions(batch.actions)]
+        if self.feature_clip is not None:
+            parts = [part.clamp(-self.feature_clip, self.feature_clip) for part in parts]
         if self.use_measures:
             parts.append(batch.contacts)
         if self.absorbing == "learned":
