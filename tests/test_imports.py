@@ -160,6 +160,7 @@ FLOORS = (
         "qdil.recipe",
         "qdil.recipe_load",
         "qdil.recipe_schema",
+        "qdil.recipe_parts",
         "qdil.experiment",
         "qdil.finished_run",
         "qdil.run_names",

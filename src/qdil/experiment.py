@@ -119,6 +119,17 @@ class RunFolder:
         return cls(loaded, name, run_dir, resolved, state, done)
 
 
+def _stem(recipe: dict[str, Any]) -> str:
+    """``walker2d_gail``: the task's first word and the reward model's registered name."""
+    from qdil.rewards.names import declared_name
+
+    env, reward = recipe.get("env") or {}, recipe["reward"]
+    task = str(env.get("task", "Walker2d-v5") if isinstance(env, dict) else "task")
+    path = str(reward.get("class_path", "") if isinstance(reward, dict) else reward)
+    model = declared_name(path) if "." in path else path
+    return f"{task.split('-')[0].lower()}_{model or path.rpartition('.')[2].lower()}"
+
+
 def check_unchanged(state: dict[str, Any], resolved: dict[str, Any], run_dir: Path) -> None:
     """Refuse a resume whose recipe differs from the one stored with its checkpoint.
 
@@ -189,6 +200,48 @@ class Experiment:
             if value is not None:
                 extra += [key, str(value)]
         return cls.open(RunFolder.of(load_recipe(recipe, extra)))
+
+    @classmethod
+    def from_parts(
+        cls,
+        *,
+        env: Any,
+        reward: Any,
+        qd: Any,
+        seed: int = 0,
+        root: str | Path | None = None,
+        name: str | None = None,
+        **sections: Any,
+    ) -> Experiment:
+        """Build a new run from Python objects, without a recipe file.
+
+        Args:
+            env: the task and its simulations (``qdil.config.EnvConfig``).
+            reward: a reward model class, ``functools.partial(Class, key=value)`` with its
+                options, or a registered name (``"gail"``).
+            qd: archives, emitter, scheduler (``qdil.config.QDConfig``; its ``emitter`` and
+                ``scheduler`` classes or partials).
+            seed: the run's seed.
+            root: the runs folder (default: ``logging.root``).
+            name: the run's name (default: the task's and the reward model's, and the seed:
+                ``walker2d_gail-seed0``).
+            **sections: ``policy``, ``rl`` (a class or partial; ``None`` for gradient-free
+                emitters), ``bonus``, ``demos``, ``logging``, ``executor``
+                (:func:`qdil.recipe_parts.recipe_of`).
+
+        Raises:
+            RecipeError: an object a recipe cannot record, a bad value, or a folder that
+                already holds a run.
+        """
+        from qdil.recipe_parts import recipe_of
+
+        recipe = recipe_of(env=env, reward=reward, qd=qd, seed=seed, **sections)
+        extra = []
+        for key, value in (("--logging.root", root), ("--name", name)):
+            if value is not None:
+                extra += [key, str(value)]
+        loaded = load_recipe(recipe, extra, stem=_stem(recipe))
+        return cls.open(RunFolder.of(loaded))
 
     @classmethod
     def resume(cls, run_dir: str | Path, overrides: list[str] | tuple[str, ...] = ()) -> Experiment:

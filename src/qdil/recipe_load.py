@@ -7,6 +7,7 @@ when a recipe is read.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -62,17 +63,20 @@ def recipe_parser(
 
 
 def load_recipe(
-    source: str | Path,
+    source: str | Path | Mapping[str, Any],
     overrides: list[str] = (),
     *,
     resume: bool = False,  # type: ignore[assignment]
+    stem: str = "experiment",
 ) -> LoadedRecipe:
     """Read and check a recipe file (or, with ``resume``, a run directory's recipe).
 
     The values are checked here, before any run directory exists.
 
     Args:
-        source: a recipe file, or with ``resume`` a run directory.
+        source: a recipe file, or with ``resume`` a run directory, or a recipe's mapping
+            (what ``yaml.safe_load`` of a file gives: :func:`qdil.recipe_parts.recipe_of`).
+        stem: a mapping's name in the default run name (a file's is its own).
         overrides: command-line style overrides (``["--seed", "3", "--reward", "gail"]``).
         resume: ``source`` is a run directory to continue.
 
@@ -85,8 +89,12 @@ def load_recipe(
     from qdil.upgrades import upgraded
 
     overrides = list(overrides)
+    if resume and isinstance(source, Mapping):
+        raise RecipeError("resume continues a run directory: give its path, not a recipe")
     resume_dir = Path(source) if resume else None
-    if resume_dir is not None:
+    if isinstance(source, Mapping):
+        base, content = "built in Python", dict(source)
+    elif resume_dir is not None:
         base, stem = resume_dir / CONFIG_NAME, resume_dir.name
         if not base.is_file():
             raise RecipeError(
@@ -102,12 +110,13 @@ def load_recipe(
             examples = sorted(base.glob("*.yaml"))[:1]
             example = f", e.g. {examples[0]}" if examples else ""
             raise RecipeError(f"recipe {base} is a directory; give a recipe file (YAML){example}")
-    try:
-        content = yaml.safe_load(base.read_text()) or {}
-    except yaml.YAMLError as error:
-        raise RecipeError(f"recipe {base} is not valid YAML: {error}") from None
-    except (OSError, UnicodeDecodeError) as error:
-        raise RecipeError(f"recipe {base} cannot be read: {error}") from None
+    if not isinstance(source, Mapping):
+        try:
+            content = yaml.safe_load(base.read_text()) or {}
+        except yaml.YAMLError as error:
+            raise RecipeError(f"recipe {base} is not valid YAML: {error}") from None
+        except (OSError, UnicodeDecodeError) as error:
+            raise RecipeError(f"recipe {base} cannot be read: {error}") from None
     if not isinstance(content, dict):
         raise RecipeError(f"recipe {base} must be a mapping of sections (env, reward, rl, qd, ...)")
     content = upgraded(content)  # a run's config.yaml from before a class or key moved
