@@ -41,25 +41,17 @@ def build_recipe(
         resume: a checkpoint will be restored into the run (its reward pretraining is
             skipped: the checkpoint holds its result).
     """
+    import inspect
+
     import yaml
 
+    from qdil.recipe import recipe
     from qdil.run import build_run
 
+    # the recipe's sections, as recipe() declares them; ``name`` is the run's, given here
+    sections = {key: init[key] for key in inspect.signature(recipe).parameters if key != "name"}
     return build_run(
-        name=name,
-        run_dir=run_dir,
-        seed=init.seed,
-        env=init.env,
-        policy=init.policy,
-        rl=init.rl,
-        reward=init.reward,
-        bonus=init.bonus,
-        demos=init.demos,
-        qd=init.qd,
-        logging=init.logging,
-        config=yaml.safe_load(resolved),
-        resume=resume,
-        executor=init.executor,
+        name=name, run_dir=run_dir, config=yaml.safe_load(resolved), resume=resume, **sections
     )
 
 

@@ -15,8 +15,7 @@ from collections.abc import Mapping
 from typing import Any
 
 from qdil.recipe_load import RecipeError
-
-SECTIONS = ("reward", "env", "qd", "policy", "rl", "bonus", "demos", "logging", "executor")
+from qdil.recipe_schema import schema
 
 
 def recipe_of(**sections: Any) -> dict[str, Any]:
@@ -37,11 +36,11 @@ def recipe_of(**sections: Any) -> dict[str, Any]:
         RecipeError: naming the section of an object that a recipe cannot record (an
             instance already built: give its class, or a partial of it, instead).
     """
-    unknown = sorted(set(sections) - {*SECTIONS, "seed", "name"})
+    known = schema()  # recipe()'s parameters, read from its source
+    unknown = sorted(set(sections) - set(known.sections)) if known else []
     if unknown:
         raise RecipeError(
-            f"unknown recipe section {unknown[0]!r}; the sections are: {', '.join(SECTIONS)}, "
-            "seed, name"
+            f"unknown recipe section {unknown[0]!r}; the sections are: " + ", ".join(known.sections)
         )
     return {key: _value(value, key) for key, value in sections.items()}
 
