@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import html
 import itertools
+import json
 import re
 import time
 from pathlib import Path
@@ -29,8 +30,13 @@ from qdil.evaluation.report import write_report
 ROOT = Path(__file__).resolve().parents[2]
 STEPS = 30
 SMALL = VideoSettings(count=2, width=96, height=64, max_steps=STEPS)
-RECT = re.compile(r"<rect ([^>]*)>")
+SVG = re.compile(
+    r'<svg class="archive" ([^>]*)>.*?</svg><script type="application/json" class="cells">'
+    r"(.*?)</script>",
+    re.S,
+)
 ATTRIBUTE = re.compile(r'([\w-]+)="([^"]*)"')
+FIELDS = ("x", "y", "width", "height", "data-cell", "data-ret", "data-measures")
 
 
 @pytest.fixture(scope="module")
@@ -47,9 +53,17 @@ def page(run_dir: Path, gl: str, tmp_path_factory: pytest.TempPathFactory):
 
 
 def cells_of(page_html: str) -> list[dict[str, str]]:
-    """The data of every clickable cell on a page."""
-    rects = [dict(ATTRIBUTE.findall(attributes)) for attributes in RECT.findall(page_html)]
-    return [{k: html.unescape(v) for k, v in rect.items()} for rect in rects]
+    """The data of every clickable cell on a page, as the page's script draws it: each
+    heatmap's JSON cells with the panel and run of their SVG."""
+    cells = []
+    for attributes, payload in SVG.findall(page_html):
+        svg = {k: html.unescape(v) for k, v in ATTRIBUTE.findall(attributes)}
+        for entry in json.loads(payload):
+            cell = dict(zip(FIELDS, map(str, entry), strict=False))
+            if len(entry) > len(FIELDS):
+                cell["data-video"], cell["data-episode"] = entry[len(FIELDS) :]
+            cells.append({"data-panel": svg["data-panel"], "data-run": svg["data-run"], **cell})
+    return cells
 
 
 def test_the_clickable_boxes_sit_on_the_heatmaps_cells(tmp_path: Path) -> None:
@@ -117,6 +131,8 @@ def test_chromium_plays_a_clicked_cells_video_without_errors(page) -> None:
     )
     with Chromium(executable, width=1000, height=800) as browser:
         browser.open(page.out / "report.html")
+        drawn = browser.evaluate("document.querySelectorAll('rect.cell').length")
+        assert drawn == len(cells_of((page.out / "report.html").read_text())) > 0
         browser.click("rect.cell:not(.video)")
         assert "No video of this cell" in browser.evaluate("document.body.innerText")
         browser.click("rect.cell.video")
@@ -161,4 +177,5 @@ def test_videos_0_asks_for_none_quietly(run_dir: Path, tmp_path: Path, capsys) -
     assert capsys.readouterr().err == ""
     report = (tmp_path / "report.html").read_text()
     assert "No videos: none asked for (qdil report --videos 0)." in report
-    assert cells_of(report) and "data-video" not in report
+    cells = cells_of(report)
+    assert cells and not any("data-video" in cell for cell in cells)

@@ -2,7 +2,9 @@
 
 Each heatmap PNG (pyribs' ``grid_archive_heatmap``, :mod:`qdil.evaluation.figures`) sits in
 an inline SVG with one transparent rectangle over every filled cell, placed from the
-figure's own axes (:class:`~qdil.evaluation.figures.HeatmapGrid`). A click on a cell shows,
+figure's own axes (:class:`~qdil.evaluation.figures.HeatmapGrid`); the page carries the
+cells as compact JSON beside each SVG and its script draws the rectangles (a page of
+thousands of cells stays small). A click on a cell shows,
 under the table, the run, the cell, its return and measures and, for the cells the report
 rendered (:mod:`qdil.evaluation.gallery`), the elite's video; those cells have a blue
 outline. Below, one gallery row per run holds its videos. The page needs nothing online:
@@ -12,6 +14,7 @@ thirty lines of plain JavaScript, the PNGs and the MP4s beside it.
 from __future__ import annotations
 
 import html
+import json
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
@@ -35,8 +38,28 @@ _STYLE = (
     ".gallery video{display:block;max-width:240px}"
 )
 
-# fills a task's panel from the clicked cell's data-* attributes (text only, never markup)
+# draws each heatmap's cells from the JSON beside it, and fills a task's panel from the
+# clicked cell's data-* attributes (text only, never markup)
 _SCRIPT = """
+const SVG = 'http://www.w3.org/2000/svg';
+function qdilCells() {
+  document.querySelectorAll('script.cells').forEach(data => {
+    const svg = data.previousElementSibling, d = svg.dataset;
+    for (const [x, y, w, h, cell, ret, measures, video, episode] of JSON.parse(data.text)) {
+      const rect = document.createElementNS(SVG, 'rect');
+      const title = document.createElementNS(SVG, 'title');
+      rect.setAttribute('class', video ? 'cell video' : 'cell');
+      const box = {x, y, width: w, height: h, tabindex: 0};
+      Object.entries(box).forEach(([k, v]) => rect.setAttribute(k, v));
+      Object.assign(rect.dataset, {panel: d.panel, run: d.run, cell, ret, measures});
+      if (video) Object.assign(rect.dataset, {video, episode});
+      title.textContent = 'cell ' + cell + ': return ' + ret;
+      rect.append(title); svg.append(rect);
+    }
+  });
+}
+if (document.readyState === 'loading') document.addEventListener('DOMContentLoaded', qdilCells);
+else qdilCells();
 function qdilShow(cell) {
   const d = cell.dataset, panel = document.getElementById(d.panel);
   document.querySelectorAll('.cell.selected').forEach(c => c.classList.remove('selected'));
@@ -100,37 +123,49 @@ def heatmap_svg(
     assert run.archive is not None  # every included run has its final archive
     data = run.archive.data(["index", "objective", "measures"])
     by_cell = {video.cell: video for video in videos}
-    rects = []
-    cells = run.archive.int_to_grid_index(data["index"])
-    for cell, value, measures in zip(cells, data["objective"], data["measures"], strict=True):
+    cells = []
+    for cell, value, measures in zip(
+        run.archive.int_to_grid_index(data["index"]), data["objective"], data["measures"],
+        strict=True,
+    ):  # fmt: skip
         key = tuple(int(i) for i in cell)
         x, y, w, h = grid.box(key)
-        text = _cell_text(key)
-        attributes = {
-            "data-panel": panel,
-            "data-run": run_title(run),
-            "data-cell": text,
-            "data-ret": f"{value:,.1f}",
-            "data-measures": _measures(measures),
-        }
+        entry = [round(x, 1), round(y, 1), round(w, 1), round(h, 1), _cell_text(key)]
+        entry += [f"{value:,.1f}", _measures(measures)]
         video = by_cell.get(key)
         if video is not None:
-            attributes["data-video"] = video.path.relative_to(out).as_posix()
-            attributes["data-episode"] = (
+            entry += [
+                video.path.relative_to(out).as_posix(),
                 f"The video: one deterministic episode, {video.steps} steps, return "
-                f"{video.episode_return:,.1f}, measures ({_measures(video.measures)})."
-            )
-        data_attributes = " ".join(f'{k}="{_attr(v)}"' for k, v in attributes.items())
-        rects.append(
-            f'<rect class="cell{" video" if video else ""}" x="{x:.1f}" y="{y:.1f}" '
-            f'width="{w:.1f}" height="{h:.1f}" tabindex="0" {data_attributes}>'
-            f"<title>cell {text}: return {value:,.1f}</title></rect>"
-        )
-    label = _attr(f"{run_title(run)}: archive heatmap, click a cell")
+                f"{video.episode_return:,.1f}, measures ({_measures(video.measures)}).",
+            ]
+        cells.append(entry)
+    return archive_svg(run_title(run), png, grid.width, grid.height, panel, cells)
+
+
+def archive_svg(
+    title: str, png: str, width: float, height: float, panel: str, cells: list[list]
+) -> str:
+    """A heatmap PNG in an SVG, and its filled cells as JSON for the page's script.
+
+    Args:
+        title: the run, as the page names it.
+        png: the heatmap PNG, relative to the page.
+        width: the SVG's width (the PNG's pixels).
+        height: its height.
+        panel: id of the element that shows a clicked cell.
+        cells: per filled cell ``[x, y, w, h, cell, return, measures]`` (the box in the
+            PNG's pixels, then the texts the panel shows), with ``video`` (relative to the
+            page) and ``episode`` (its caption) appended where the cell has a video.
+    """
+    label = _attr(f"{title}: archive heatmap, click a cell")
+    # "</" would end the script element early: JSON allows "<\/" for it
+    payload = json.dumps(cells, ensure_ascii=False, separators=(",", ":")).replace("</", "<\\/")
     return (
-        f'<svg class="archive" viewBox="0 0 {grid.width} {grid.height}" role="img" '
-        f'aria-label="{label}"><image href="{_attr(png)}" width="{grid.width}" '
-        f'height="{grid.height}"/>{"".join(rects)}</svg>'
+        f'<svg class="archive" viewBox="0 0 {width:g} {height:g}" role="img" '
+        f'aria-label="{label}" data-panel="{_attr(panel)}" data-run="{_attr(title)}">'
+        f'<image href="{_attr(png)}" width="{width:g}" height="{height:g}"/></svg>'
+        f'<script type="application/json" class="cells">{payload}</script>'
     )
 
 
