@@ -77,8 +77,11 @@ def test_a_crashed_trial_stops_no_other(one_ray, plain, tmp_path, capsys) -> Non
         main([*command, "--episodes", "0", "--demos.path", str(broken)])
     (true_run,) = root.glob("walker_true-*-seed0")  # named with the options' hash
     assert same_runs(true_run, plain / "walker_true-seed0")
-    said = capsys.readouterr().err
+    out, said = capsys.readouterr()
     assert "FAILED walker_il-" in said and "broken.npz" in said
+    # qdil's table and one line per failure; Tune's banner and the traceback stay out
+    assert "Configuration for experiment" not in out + said
+    assert "Traceback" not in out + said
 
 
 def test_a_missing_demonstration_file_stops_the_sweep_before_anything_starts(tmp_path) -> None:

@@ -9,8 +9,12 @@ finishes at once the runs that are done.
 
 from __future__ import annotations
 
+import contextlib
+import logging
+import os
 import sys
 import time
+from collections.abc import Iterator
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -108,7 +112,10 @@ def run_sweep(
     started = not ray.is_initialized()
     if started:
         ray.init(
-            address=ray_address(resources.address), include_dashboard=False, log_to_driver=False
+            address=ray_address(resources.address),
+            include_dashboard=False,
+            log_to_driver=False,
+            logging_level=logging.ERROR,  # not "Started a local Ray instance" and the like
         )
     try:
         specs = [
@@ -143,7 +150,8 @@ def run_sweep(
             tuner = tune.Tuner(
                 trainable, param_space=space, tune_config=tune_config, run_config=run_config
             )
-        results = tuner.fit()
+        with _quiet_tune():
+            results = tuner.fit()
         table.show(force=True)
     finally:
         if started:
@@ -154,6 +162,24 @@ def run_sweep(
     if search is not None:
         ranked.sort(key=lambda row: row[1], reverse=search.mode == "max")
     return Outcome(failed, ranked)
+
+
+@contextlib.contextmanager
+def _quiet_tune() -> Iterator[None]:
+    """Ray Tune without its own console output: qdil's table says what each trial does.
+
+    Tune's newer output engine prints its experiment banner whatever ``verbose`` says; its
+    older one honours ``verbose=0``.
+    """
+    before = os.environ.get("RAY_AIR_NEW_OUTPUT")
+    os.environ["RAY_AIR_NEW_OUTPUT"] = "0"
+    try:
+        yield
+    finally:
+        if before is None:
+            del os.environ["RAY_AIR_NEW_OUTPUT"]
+        else:
+            os.environ["RAY_AIR_NEW_OUTPUT"] = before
 
 
 @dataclass(frozen=True)
