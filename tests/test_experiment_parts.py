@@ -93,3 +93,25 @@ def test_bad_values_built_in_python_are_refused_as_in_a_file(tmp_path: Path) -> 
     with pytest.raises(ValueError, match=r"unknown task .Walker3d-v5.; known tasks: Walker2d"):
         Experiment.from_parts(**parts, root=tmp_path)
     assert not any(tmp_path.iterdir())
+
+
+def test_runs_change_no_global_random_state_and_interleave_as_if_alone(tmp_path: Path) -> None:
+    """Each run keeps its own torch generator state: two stepped in turns equal one alone,
+    and the caller's generator is where it was after every build and step."""
+    import torch
+
+    with Experiment.from_recipe(SMOKE, seed=0, root=tmp_path, name="alone") as alone:
+        alone.fit()
+    torch.manual_seed(1234)
+    before = torch.get_rng_state()
+    first = Experiment.from_recipe(SMOKE, seed=0, root=tmp_path, name="first")
+    second = Experiment.from_recipe(SMOKE, seed=0, root=tmp_path, name="second")
+    assert torch.equal(torch.get_rng_state(), before)
+    for _ in range(3):
+        first.step()
+        second.step()
+        assert torch.equal(torch.get_rng_state(), before)
+    first.close()
+    second.close()
+    for run in ("first", "second"):
+        assert _rows(tmp_path / run) == _rows(tmp_path / "alone"), run

@@ -341,7 +341,8 @@ class Experiment:
         """Save a checkpoint now (a resume continues from here)."""
         from qdil.qd.checkpoint import save_checkpoint
 
-        save_checkpoint(self.run)
+        with self.run.own_torch_rng():  # the checkpoint keeps the run's generator state
+            save_checkpoint(self.run)
         self._saved = time.monotonic()
 
     def close(self) -> None:

@@ -311,61 +311,68 @@ def build_run(
             a device the run cannot use).
     """
     _, rl_seed, emitter_seed, archive_seed, loop_seed, torch_seed, x0_seed = _seeds(seed, 7)
-    torch.manual_seed(torch_seed)
-    policy = PolicyConfig() if policy is None else policy
+    # the networks draw their first weights from torch's global generator: seeded for the
+    # run here, the caller's state given back after (a run changes no one's random state)
+    with torch.random.fork_rng(devices=[]):
+        torch.manual_seed(torch_seed)
+        policy = PolicyConfig() if policy is None else policy
 
-    train_env = _environment(env, env.num_envs, "SameStep", env.device)
-    device = train_env.device  # checked with env.backend before anything was built
-    obs_dim = train_env.single_observation_space.shape[0]
-    action_dim = train_env.single_action_space.shape[0]
-    solution_dim = VectorizedActor.solution_dim(obs_dim, action_dim, policy.hidden)
+        train_env = _environment(env, env.num_envs, "SameStep", env.device)
+        device = train_env.device  # checked with env.backend before anything was built
+        obs_dim = train_env.single_observation_space.shape[0]
+        action_dim = train_env.single_action_space.shape[0]
+        solution_dim = VectorizedActor.solution_dim(obs_dim, action_dim, policy.hidden)
 
-    archives = _archives(qd, solution_dim, obs_dim, train_env.num_feet, archive_seed, run_dir)
-    x0 = VectorizedActor.initial_solution(obs_dim, action_dim, policy.hidden, x0_seed)
-    emitter, scheduler = make_search(
-        qd, archives.main, x0, obs_dim, [emitter_seed, *_seeds(emitter_seed, qd.emitters - 1)],
-        rl is not None,
-    )  # fmt: skip
+        archives = _archives(qd, solution_dim, obs_dim, train_env.num_feet, archive_seed, run_dir)
+        x0 = VectorizedActor.initial_solution(obs_dim, action_dim, policy.hidden, x0_seed)
+        emitter, scheduler = make_search(
+            qd, archives.main, x0, obs_dim, [emitter_seed, *_seeds(emitter_seed, qd.emitters - 1)],
+            rl is not None,
+        )  # fmt: skip
 
-    eval_env = _environment(env, _eval_size(env, qd, scheduler, rl), "Disabled", device)
-    executor, scorer, noise = set_up_policies(train_env, eval_env, rl, policy, executor, rl_seed)
-
-    model, optimizers, fabric = _reward_model(reward, bonus, archives, train_env)
-    if rl is None and model.needs_log_probs:
-        raise ValueError(
-            "rl: null: the reward model needs log-probs of the policy it rewards (AIRL), "
-            "which gradient-free emitters do not have (no one policy acts); use an estimator"
+        eval_env = _environment(env, _eval_size(env, qd, scheduler, rl), "Disabled", device)
+        executor, scorer, noise = set_up_policies(
+            train_env, eval_env, rl, policy, executor, rl_seed
         )
-    demo_set = _demos(model, demos, env.task)
-    model.setup(demo_set)
-    if not resume:  # a resumed run's checkpoint holds the pretrained weights
-        model.pretrain(demo_set)
-    expert = demo_set.transitions().to(device) if demo_set is not None else None
 
-    run_dir.mkdir(parents=True, exist_ok=True)
-    tracker = Tracker(run_dir, logging, name, config)
-    return Run(
-        name=name,
-        run_dir=run_dir,
-        task=env.task,
-        seed=seed,
-        qd=qd,
-        logging=logging,
-        env=train_env,
-        eval_env=eval_env,
-        executor=executor,
-        scorer=scorer,
-        noise=noise,
-        estimator=rl,
-        reward=model,
-        reward_optimizers=optimizers,
-        fabric=fabric,
-        scheduler=scheduler,
-        emitter=emitter,
-        archives=archives,
-        demos=demo_set,
-        expert=expert,
-        state=LoopState(rng=np.random.default_rng(loop_seed)),
-        tracker=tracker,
-        config=config,
-    )
+        model, optimizers, fabric = _reward_model(reward, bonus, archives, train_env)
+        if rl is None and model.needs_log_probs:
+            raise ValueError(
+                "rl: null: the reward model needs log-probs of the policy it rewards (AIRL), "
+                "which gradient-free emitters do not have (no one policy acts); use an estimator"
+            )
+        demo_set = _demos(model, demos, env.task)
+        model.setup(demo_set)
+        if not resume:  # a resumed run's checkpoint holds the pretrained weights
+            model.pretrain(demo_set)
+        expert = demo_set.transitions().to(device) if demo_set is not None else None
+
+        torch_rng = torch.get_rng_state()  # the run's, lent back by Run.own_torch_rng
+        run_dir.mkdir(parents=True, exist_ok=True)
+        tracker = Tracker(run_dir, logging, name, config)
+        return Run(
+            name=name,
+            run_dir=run_dir,
+            task=env.task,
+            seed=seed,
+            qd=qd,
+            logging=logging,
+            env=train_env,
+            eval_env=eval_env,
+            executor=executor,
+            scorer=scorer,
+            noise=noise,
+            estimator=rl,
+            reward=model,
+            reward_optimizers=optimizers,
+            fabric=fabric,
+            scheduler=scheduler,
+            emitter=emitter,
+            archives=archives,
+            demos=demo_set,
+            expert=expert,
+            state=LoopState(rng=np.random.default_rng(loop_seed)),
+            tracker=tracker,
+            config=config,
+            torch_rng=torch_rng,
+        )

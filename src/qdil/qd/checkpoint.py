@@ -228,7 +228,7 @@ def load_checkpoint(run: Run, state: dict[str, Any] | None = None) -> None:
     run.state.seconds = state["seconds"]
     run.state.rng = np.random.default_rng()
     run.state.rng.bit_generator.state = state["rng"]
-    torch.set_rng_state(state["torch_rng"])
+    run.torch_rng = state["torch_rng"]  # lent to torch while the run computes
     run.scheduler = scheduler
     if run.estimator is not None:
         run.emitter = run.scheduler.emitters[0]

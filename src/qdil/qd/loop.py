@@ -369,12 +369,13 @@ def next_iteration(run: Run, saved: float) -> tuple[dict[str, float], float]:
     Returns:
         The iteration's metrics and the time of the last checkpoint.
     """
-    run.state.iteration += 1
-    metrics = qd_iteration(run)
-    run.tracker.log(metrics, run.state.iteration, run)
-    if _checkpoint_due(run, time.monotonic() - saved):
-        save_checkpoint(run)
-        saved = time.monotonic()
+    with run.own_torch_rng():
+        run.state.iteration += 1
+        metrics = qd_iteration(run)
+        run.tracker.log(metrics, run.state.iteration, run)
+        if _checkpoint_due(run, time.monotonic() - saved):
+            save_checkpoint(run)
+            saved = time.monotonic()
     return metrics, saved
 
 

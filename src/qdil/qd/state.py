@@ -8,6 +8,8 @@ the modules that import it.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
@@ -98,3 +100,21 @@ class Run:
     tracker: RunTracker
     config: dict[str, Any] = field(default_factory=dict)
     """The resolved recipe; checkpoints store it so a resume can tell an edited config.yaml."""
+    torch_rng: torch.Tensor | None = None
+    """The state of torch's global generator as the run left it (network initialisations,
+    the reward model's noise draw from it): :meth:`own_torch_rng` lends it to the generator
+    while the run computes, so that a run changes no one else's random state."""
+
+    @contextmanager
+    def own_torch_rng(self) -> Iterator[None]:
+        """Torch's global generator holds the run's state inside, the caller's after."""
+        import torch
+
+        outside = torch.get_rng_state()
+        if self.torch_rng is not None:
+            torch.set_rng_state(self.torch_rng)
+        try:
+            yield
+        finally:
+            self.torch_rng = torch.get_rng_state()
+            torch.set_rng_state(outside)
