@@ -15,6 +15,7 @@ from qdil.config import EnvConfig, LoggingConfig, QDConfig
 from qdil.qd import VPPO, PPGAEmitter
 from qdil.recipe_parts import recipe_of
 from qdil.rewards.builtin import TrueReward
+from qdil.tracking import Tracker
 from tests.commands import SMOKE
 
 # recipes/smoke/walker_true.yaml, as objects
@@ -115,3 +116,26 @@ def test_runs_change_no_global_random_state_and_interleave_as_if_alone(tmp_path:
     second.close()
     for run in ("first", "second"):
         assert _rows(tmp_path / run) == _rows(tmp_path / "alone"), run
+
+
+class Remembering(Tracker):
+    """A user's tracker: qdil's records, and every iteration's QD-Score kept in memory."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self.seen: list[tuple[int, float]] = []
+
+    def log(self, metrics, iteration, run) -> None:
+        super().log(metrics, iteration, run)
+        self.seen.append((iteration, metrics["qd/qd_score"]))
+
+
+def test_the_tracker_is_an_argument(tmp_path: Path) -> None:
+    with Experiment.from_recipe(SMOKE, root=tmp_path, name="mine", tracker=Remembering) as run:
+        run.fit()
+        seen = run.run.tracker.seen
+    logged = [(int(r["iteration"]), float(r["qd/qd_score"])) for r in _rows(tmp_path / "mine")]
+    assert seen == logged and [i for i, _ in seen] == [1, 2, 3]
+    with Experiment.resume(tmp_path / "mine", ["--qd.iterations", "4"], Remembering) as again:
+        again.fit()
+        assert [i for i, _ in again.run.tracker.seen] == [4]

@@ -29,7 +29,13 @@ if TYPE_CHECKING:
 
 
 def build_recipe(
-    init: Any, name: str, run_dir: Path, resolved: str, *, resume: bool = False
+    init: Any,
+    name: str,
+    run_dir: Path,
+    resolved: str,
+    *,
+    resume: bool = False,
+    tracker: type[Tracker] | None = None,
 ) -> Run:
     """The run of an instantiated recipe (jsonargparse's ``instantiate`` of a parsed one).
 
@@ -40,6 +46,7 @@ def build_recipe(
         resolved: the resolved recipe as YAML (stored in checkpoints).
         resume: a checkpoint will be restored into the run (its reward pretraining is
             skipped: the checkpoint holds its result).
+        tracker: the tracker's class (default: :class:`qdil.tracking.Tracker`).
     """
     import inspect
 
@@ -50,8 +57,14 @@ def build_recipe(
 
     # the recipe's sections, as recipe() declares them; ``name`` is the run's, given here
     sections = {key: init[key] for key in inspect.signature(recipe).parameters if key != "name"}
+    options = {"tracker": tracker} if tracker is not None else {}
     return build_run(
-        name=name, run_dir=run_dir, config=yaml.safe_load(resolved), resume=resume, **sections
+        name=name,
+        run_dir=run_dir,
+        config=yaml.safe_load(resolved),
+        resume=resume,
+        **sections,
+        **options,
     )
 
 
@@ -174,6 +187,7 @@ class Experiment:
         seed: int | None = None,
         root: str | Path | None = None,
         name: str | None = None,
+        tracker: type[Tracker] | None = None,
     ) -> Experiment:
         """Build a new run from a recipe file.
 
@@ -183,6 +197,9 @@ class Experiment:
             seed: the run's seed (default: the recipe's).
             root: the runs folder (default: the recipe's ``logging.root``).
             name: the run's name (default: the recipe's stem and seed, as ``qdil fit``).
+            tracker: the class that records each iteration: :class:`qdil.tracking.Tracker`
+                (the default: ``metrics.csv``, and W&B as ``logging.wandb`` says) or a
+                subclass of it.
 
         Raises:
             RecipeError: a bad recipe or override, or a folder that already holds a run.
@@ -191,7 +208,7 @@ class Experiment:
         for key, value in (("--seed", seed), ("--logging.root", root), ("--name", name)):
             if value is not None:
                 extra += [key, str(value)]
-        return cls.open(RunFolder.of(load_recipe(recipe, extra)))
+        return cls.open(RunFolder.of(load_recipe(recipe, extra)), tracker)
 
     @classmethod
     def from_parts(
@@ -203,6 +220,7 @@ class Experiment:
         seed: int = 0,
         root: str | Path | None = None,
         name: str | None = None,
+        tracker: type[Tracker] | None = None,
         **sections: Any,
     ) -> Experiment:
         """Build a new run from Python objects, without a recipe file.
@@ -217,6 +235,7 @@ class Experiment:
             root: the runs folder (default: ``logging.root``).
             name: the run's name (default: the task's and the reward model's, and the seed:
                 ``walker2d_gail-seed0``).
+            tracker: the class that records each iteration (see :meth:`from_recipe`).
             **sections: ``policy``, ``rl`` (a class or partial; ``None`` for gradient-free
                 emitters), ``bonus``, ``demos``, ``logging``, ``executor``
                 (:func:`qdil.recipe_parts.recipe_of`).
@@ -233,20 +252,26 @@ class Experiment:
             if value is not None:
                 extra += [key, str(value)]
         loaded = load_recipe(recipe, extra, stem=_stem(recipe))
-        return cls.open(RunFolder.of(loaded))
+        return cls.open(RunFolder.of(loaded), tracker)
 
     @classmethod
-    def resume(cls, run_dir: str | Path, overrides: list[str] | tuple[str, ...] = ()) -> Experiment:
+    def resume(
+        cls,
+        run_dir: str | Path,
+        overrides: list[str] | tuple[str, ...] = (),
+        tracker: type[Tracker] | None = None,
+    ) -> Experiment:
         """Reopen a run folder at its last checkpoint (or start it over if it has none).
 
         Args:
             run_dir: a folder made by ``qdil fit`` or :meth:`from_recipe`.
             overrides: the resumable keys only (``qd.iterations``, ``logging.*``, ...).
+            tracker: the class that records each iteration (see :meth:`from_recipe`).
         """
-        return cls.open(RunFolder.of(load_recipe(run_dir, overrides, resume=True)))
+        return cls.open(RunFolder.of(load_recipe(run_dir, overrides, resume=True)), tracker)
 
     @classmethod
-    def open(cls, folder: RunFolder) -> Experiment:
+    def open(cls, folder: RunFolder, tracker: type[Tracker] | None = None) -> Experiment:
         """Build the run of a checked folder and write its ``config.yaml``.
 
         A run that never started leaves no folder behind if building fails.
@@ -270,7 +295,12 @@ class Experiment:
             atomic_write(run_dir / CONFIG_NAME, lambda file: file.write(folder.resolved.encode()))
             init = recipe_parser().instantiate(folder.loaded.config)
             run = build_recipe(
-                init, folder.name, run_dir, folder.resolved, resume=folder.state is not None
+                init,
+                folder.name,
+                run_dir,
+                folder.resolved,
+                resume=folder.state is not None,
+                tracker=tracker,
             )
         except BaseException:
             if fresh:  # a run that never started leaves no directory behind, nor its root

@@ -291,6 +291,7 @@ def build_run(
     policy: PolicyConfig | None = None,
     resume: bool = False,
     executor: Executor | None = None,
+    tracker: type[Tracker] = Tracker,
 ) -> Run:
     """Build every component of a run from the instantiated recipe sections.
 
@@ -302,6 +303,9 @@ def build_run(
     With ``resume``, the reward model's offline pretraining is skipped: the checkpoint
     that :func:`~qdil.qd.checkpoint.load_checkpoint` restores next holds its result.
     ``executor`` steps the simulations (default: here, :class:`LocalExecutor`).
+    ``tracker`` records each iteration: :class:`~qdil.tracking.Tracker` (``metrics.csv``,
+    and W&B as ``logging`` says) or a subclass of it, built with the run's folder, logging
+    section, name and recipe.
 
     ``env.device`` places the run: the physics, policies, the estimator, the reward model
     (Fabric's accelerator) and the bonus run there; pyribs and xNES stay on the host.
@@ -349,7 +353,7 @@ def build_run(
 
         torch_rng = torch.get_rng_state()  # the run's, lent back by Run.own_torch_rng
         run_dir.mkdir(parents=True, exist_ok=True)
-        tracker = Tracker(run_dir, logging, name, config)
+        tracker = tracker(run_dir, logging, name, config)
         return Run(
             name=name,
             run_dir=run_dir,
