@@ -87,7 +87,9 @@ def test_what_a_recipe_cannot_record_is_named() -> None:
 
 def test_bad_values_built_in_python_are_refused_as_in_a_file(tmp_path: Path) -> None:
     """The same checks as a recipe file's, and a run that never started leaves no folder."""
-    parts = {**PARTS, "qd": QDConfig(iterations=0)}
+    with pytest.raises(ValueError, match=r"^qd\.iterations must be at least 1, got 0; set it"):
+        QDConfig(iterations=0)  # a section checks its own ranges, however it is built
+    parts = {**PARTS, "qd": {"iterations": 0}}
     with pytest.raises(RecipeError, match=r"recipe built in Python: qd\.iterations must be at"):
         Experiment.from_parts(**parts, root=tmp_path)
     parts = {**PARTS, "env": EnvConfig(task="Walker3d-v5", num_envs=6)}

@@ -13,7 +13,7 @@ from __future__ import annotations
 import typing
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING, Any, ClassVar, Literal
 
 import numpy as np
 from ribs.archives import ArchiveBase
@@ -38,6 +38,42 @@ SchedulerFactory = Callable[[ArchiveBase, list[Emitter]], Scheduler]
 
 
 @dataclass
+class Checked:
+    """A recipe section whose numbers have smallest values, checked when it is built.
+
+    A section built in Python (``EnvConfig(num_envs=0)``) is refused as a recipe file's
+    would be, naming the key.
+
+    Attributes:
+        section: the section's name in a recipe.
+        minimums: the smallest value of each numeric field that has one.
+    """
+
+    section: ClassVar[str] = ""
+    minimums: ClassVar[dict[str, float]] = {}
+
+    def range_problems(self) -> list[str]:
+        """One message per field below its minimum (empty if all is well)."""
+        return [
+            problem
+            for key, low in self.minimums.items()
+            if (problem := below_minimum(f"{self.section}.{key}", getattr(self, key), low))
+        ]
+
+    def __post_init__(self) -> None:
+        problems = self.range_problems()
+        if problems:
+            raise ValueError("; ".join(problems))
+
+
+def below_minimum(key: str, value: Any, low: float) -> str | None:
+    """The message for ``value`` of ``key`` under ``low``, or None (``None`` values pass)."""
+    if isinstance(value, int | float) and not isinstance(value, bool) and value < low:
+        return f"{key} must be at least {low}, got {value}; set it in the recipe or with --{key} N"
+    return None
+
+
+@dataclass
 class PolicyConfig:
     """The policies that the archive's solutions are: their network and its input.
 
@@ -55,7 +91,7 @@ class PolicyConfig:
 
 
 @dataclass
-class EnvConfig:
+class EnvConfig(Checked):
     """The task and its simulations.
 
     Attributes:
@@ -80,6 +116,14 @@ class EnvConfig:
         max_episode_steps: episode horizon (the paper: 1000).
         task_kwargs: gymnasium keyword arguments of the task (e.g. ``ctrl_cost_weight``).
     """
+
+    section: ClassVar[str] = "env"
+    minimums: ClassVar[dict[str, float]] = {
+        "num_envs": 1,
+        "eval_envs": 1,
+        "num_threads": 1,
+        "max_episode_steps": 1,
+    }
 
     task: str = "Walker2d-v5"
     num_envs: int = 3000
@@ -114,7 +158,7 @@ class SearchArchiveConfig:
 
 
 @dataclass
-class QDConfig:
+class QDConfig(Checked):
     """The quality-diversity side: archives, emitter, scheduler, evaluation.
 
     Attributes:
@@ -138,6 +182,16 @@ class QDConfig:
         scheduler: pyribs scheduler class and options (default: ``ribs.schedulers.Scheduler``).
         archive: the search archive: the grid of ``cells`` (default) or a CVT archive.
     """
+
+    section: ClassVar[str] = "qd"
+    minimums: ClassVar[dict[str, float]] = {
+        "iterations": 1,
+        "env_steps": 1,
+        "cells": 1,
+        "branch_episodes": 1,
+        "mean_episodes": 1,
+        "emitters": 1,
+    }
 
     iterations: int = 2000
     env_steps: int | None = None
@@ -167,7 +221,7 @@ def finished(qd: QDConfig | Any, iteration: int, env_steps: int) -> bool:
 
 
 @dataclass
-class DemoConfig:
+class DemoConfig(Checked):
     """Demonstrations for the reward model.
 
     Attributes:
@@ -175,12 +229,15 @@ class DemoConfig:
         num_episodes: use the first n episodes (``null``: all).
     """
 
+    section: ClassVar[str] = "demos"
+    minimums: ClassVar[dict[str, float]] = {"num_episodes": 1}
+
     path: str | None = None
     num_episodes: int | None = None
 
 
 @dataclass
-class BonusConfig:
+class BonusConfig(Checked):
     """An exploration bonus added to the reward model's rewards (any model).
 
     Attributes:
@@ -201,6 +258,9 @@ class BonusConfig:
             default). ``false`` hands the bonus to training rollouts only, as EBC does: RL
             still explores, the archive ranks by the learned reward alone.
     """
+
+    section: ClassVar[str] = "bonus"
+    minimums: ClassVar[dict[str, float]] = {"cells": 1}
 
     enabled: bool = False
     type: Literal["single_step", "ebc"] = "single_step"
@@ -231,7 +291,7 @@ class BonusConfig:
 
 
 @dataclass
-class LoggingConfig:
+class LoggingConfig(Checked):
     """Where a run writes and what it logs.
 
     Attributes:
@@ -252,6 +312,13 @@ class LoggingConfig:
             spread over the measure space, and log their gaits to W&B (0: none; W&B only;
             without headless OpenGL one line says so and the run ends as usual).
     """
+
+    section: ClassVar[str] = "logging"
+    minimums: ClassVar[dict[str, float]] = {
+        "checkpoint_every": 1,
+        "checkpoint_minutes": 0,
+        "heatmap_every": 0,
+    }
 
     root: str = "runs"
     checkpoint_every: int = 10

@@ -15,41 +15,26 @@ from jsonargparse import Namespace, lazy_instance
 
 from qdil.config import (
     BonusConfig,
+    Checked,
     DemoConfig,
     EnvConfig,
     LoggingConfig,
     PolicyConfig,
     QDConfig,
     RewardFactory,
+    below_minimum,
 )
 from qdil.executors import Executor, LocalExecutor
 from qdil.qd.vppo import VPPO
 from qdil.rewards.base import RewardContractError, RewardModel, check_contract, check_demos
 from qdil.seats import GradientEstimator, seat_problem
 
-# The smallest value of every integer key that has one. jsonargparse checks the types; these
-# limits are checked after parsing so that a message can name the key and how to set it
-# (0 iterations would leave a directory with only config.yaml, 0 cells an unusable archive,
-# checkpoint_every 0 a ZeroDivisionError after the first iteration; a negative
-# checkpoint_minutes would save after every iteration).
-MINIMUMS: dict[str, float] = {
-    "seed": 0,
-    "env.num_envs": 1,
-    "env.eval_envs": 1,
-    "env.num_threads": 1,
-    "env.max_episode_steps": 1,
-    "qd.iterations": 1,
-    "qd.env_steps": 1,
-    "qd.cells": 1,
-    "qd.branch_episodes": 1,
-    "qd.mean_episodes": 1,
-    "qd.emitters": 1,
-    "bonus.cells": 1,
-    "demos.num_episodes": 1,
-    "logging.checkpoint_every": 1,
-    "logging.checkpoint_minutes": 0,
-    "logging.heatmap_every": 0,
-}
+# The smallest value of every number that has one: the seed's here, each section's in its
+# class (qdil.config.Checked.minimums). Checked after parsing so that a message can name the
+# key and how to set it (0 iterations would leave a directory with only config.yaml, 0 cells
+# an unusable archive, checkpoint_every 0 a ZeroDivisionError after the first iteration; a
+# negative checkpoint_minutes would save after every iteration).
+SEED_MINIMUM = 0
 
 # Keys whose value is a class (``class_path`` + ``init_args``, or a dotted path).
 CLASS_KEYS = ("reward", "rl", "qd.emitter", "qd.scheduler", "executor")
@@ -102,13 +87,16 @@ def check_values(config: Namespace) -> list[str]:
         One message per key below its minimum or not applying to the chosen bonus type
         (empty if all is well).
     """
-    problems = []
-    for key, low in MINIMUMS.items():
-        value = config.get(key)
-        if isinstance(value, int | float) and not isinstance(value, bool) and value < low:
-            problems.append(
-                f"{key} must be at least {low}, got {value}; set it in the recipe or with --{key} N"
-            )
+    minimums = {"seed": SEED_MINIMUM} | {
+        f"{section.section}.{key}": low
+        for section in Checked.__subclasses__()
+        for key, low in section.minimums.items()
+    }
+    problems = [
+        problem
+        for key, low in minimums.items()
+        if (problem := below_minimum(key, config.get(key), low))
+    ]
     bonus = config.get("bonus")
     if isinstance(bonus, Namespace):
         problems += BonusConfig(**bonus.as_dict()).problems()
