@@ -242,7 +242,7 @@ def load_checkpoint(run: Run, state: dict[str, Any] | None = None) -> None:
             f"objective): it starts empty at iteration {state['iteration']}",
             file=sys.stderr,
         )
-    # checkpoints before the seats (issue 48) kept both under "vppo"
+    # checkpoints from before the seats kept both under "vppo"
     estimator_state = state["rl"] if "rl" in state else state["vppo"]
     if run.estimator is not None:
         run.estimator.load_state_dict(estimator_state)
