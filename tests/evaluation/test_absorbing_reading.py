@@ -1,4 +1,4 @@
-"""benchmarks/absorbing_reading.py reads the protocol's targets from the shipped records."""
+"""benchmarks/probes/absorbing_reading.py reads the protocol's targets from the shipped records."""
 
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ RECORDS = ROOT / "docs/reports/absorbing-evidence/runs"
 @pytest.fixture(scope="module")
 def reading():
     spec = importlib.util.spec_from_file_location(
-        "absorbing_reading", ROOT / "benchmarks" / "absorbing_reading.py"
+        "absorbing_reading", ROOT / "benchmarks" / "probes" / "absorbing_reading.py"
     )
     module = importlib.util.module_from_spec(spec)
     sys.modules[spec.name] = module  # its dataclass looks its module up there

@@ -1,4 +1,4 @@
-"""benchmarks/reward_falls.py splits a run's reward before falls into the model and the bonus."""
+"""benchmarks/probes/reward_falls.py splits the reward before falls into the model and the bonus."""
 
 from __future__ import annotations
 
@@ -23,7 +23,7 @@ WEIGHT = 0.25
 @pytest.fixture(scope="module")
 def falls():
     spec = importlib.util.spec_from_file_location(
-        "reward_falls", ROOT / "benchmarks" / "reward_falls.py"
+        "reward_falls", ROOT / "benchmarks" / "probes" / "reward_falls.py"
     )
     module = importlib.util.module_from_spec(spec)
     sys.modules[spec.name] = module

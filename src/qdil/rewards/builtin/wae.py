@@ -32,7 +32,7 @@ class WAEReward(AdversarialReward):
         latent_dim: size of z (the paper does not give it). 32 (Walker2d's and
             HalfCheetah's inputs have 25 numbers) keeps the action in the code: with 8 the
             critic hardly tells a good action from a bad one in the same state
-            (``benchmarks/reward_actions.py``, docs/rewards/balance.md).
+            (``benchmarks/probes/reward_actions.py``, docs/rewards/balance.md).
         hidden: widths of encoder, decoder and latent adversary (the paper: (100, 100)).
         regularization: λ (the paper: 1).
         **kwargs: :class:`~qdil.rewards.adversarial.AdversarialReward` options. The score

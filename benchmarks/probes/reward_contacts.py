@@ -13,7 +13,7 @@ demonstrations and the policy.
 
 Usage::
 
-    python benchmarks/reward_contacts.py runs/walker_mcwae-seed0 [RUN ...] [--demos walker2d]
+    python benchmarks/probes/reward_contacts.py runs/walker_mcwae-seed0 [RUN ...] [--demos walker2d]
 
 Runs whose reward model does not read δ(s) (``use_measures: false``) are skipped. Works
 for the WAE critics (``critic_means``, ``critic_policy_std``); one thread, seconds per run.

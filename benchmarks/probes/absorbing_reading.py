@@ -1,6 +1,6 @@
 """The absorbing-state protocol's reading, applied to its records (docs/evidence-protocol.md).
 
-``python benchmarks/absorbing_reading.py [RECORDS]`` reads each run's ``eval.json`` under
+``python benchmarks/probes/absorbing_reading.py [RECORDS]`` reads each run's ``eval.json`` under
 RECORDS (default docs/reports/absorbing-evidence/runs) whose configuration turns absorbing
 states on, and prints one row per run: its target (Humanoid: the true-keyed archive's best
 corrected elite at least 3,000; Walker2d: its corrected QD-Score at least 9.6e5), the figure,
@@ -26,7 +26,7 @@ import yaml
 
 from qdil.evaluation.runs import read_curves
 
-RECORDS = Path(__file__).resolve().parents[1] / "docs/reports/absorbing-evidence/runs"
+RECORDS = Path(__file__).resolve().parents[2] / "docs/reports/absorbing-evidence/runs"
 # episodes per elite per task: 5, and 10 on Humanoid once the 1 % rule fired on its first run
 EPISODES = {"Humanoid-v5": 10, "Walker2d-v5": 5}
 SE_RULE = 0.01

@@ -10,7 +10,7 @@ bonus.
 
 Usage::
 
-    python benchmarks/reward_falls.py RUN [RUN ...] [--elites 128] [--demos humanoid]
+    python benchmarks/probes/reward_falls.py RUN [RUN ...] [--elites 128] [--demos humanoid]
 
 One thread, about a minute per run on Humanoid.
 """

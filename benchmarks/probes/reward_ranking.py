@@ -10,7 +10,7 @@ episodes, the mean learned reward per step with the mean true reward per step (S
 Make a pool of 48 episodes from the whole archive of an expert run, then score models::
 
     qdil demos runs/walker_ppga-seed0 --top 100000 --num 48 --out pool.npz
-    python benchmarks/reward_ranking.py pool.npz gail \\
+    python benchmarks/probes/reward_ranking.py pool.npz gail \\
         "mcwae_wgail:reward_form=calibrated" "mcwae_wgail:reward_form=standardized"
 
 A model is a registered reward name with ``key=value`` options after a colon, separated by

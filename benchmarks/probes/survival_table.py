@@ -6,7 +6,7 @@ a fall paid more (docs/concepts/survival.md).
 
 Usage::
 
-    python benchmarks/survival_table.py docs/reports/humanoid-survival/runs/* [--every 5]
+    python benchmarks/probes/survival_table.py docs/reports/humanoid-survival/runs/* [--every 5]
 """
 
 from __future__ import annotations

@@ -16,7 +16,7 @@ synchronised before and after each timed block, mean over ``--reps`` calls):
 Then a ``cProfile`` of the numpy-face steps, top functions by own time. One command on a
 CUDA machine with the warp extra::
 
-    python benchmarks/probe_warp_step.py --num-envs 4096
+    python benchmarks/probes/probe_warp_step.py --num-envs 4096
 """
 
 from __future__ import annotations

@@ -12,7 +12,7 @@ by zero, so the swap would change every trajectory: it is measured here, not use
 
 Usage::
 
-    python benchmarks/probe_tanh.py [--steps 200]
+    python benchmarks/probes/probe_tanh.py [--steps 200]
 """
 
 from __future__ import annotations

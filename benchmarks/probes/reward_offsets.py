@@ -6,7 +6,7 @@ minimum per-step reward and the share of steps below −offset.
 
 Usage::
 
-    python benchmarks/reward_offsets.py [--steps 500] [--num-envs 16]
+    python benchmarks/probes/reward_offsets.py [--steps 500] [--num-envs 16]
 """
 
 from __future__ import annotations

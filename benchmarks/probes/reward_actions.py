@@ -11,12 +11,12 @@ expert's, 0 when it ignores them.
 
 Usage::
 
-    python benchmarks/reward_actions.py gail:batch_size=120 \\
+    python benchmarks/probes/reward_actions.py gail:batch_size=120 \\
         "mcwae_wgail:batch_size=120,reward_form=standardized" \\
         "mcwae_wgail:batch_size=120,reward_form=standardized,latent_dim=32" --sigma 0.5
 
 A model is a registered reward name with ``key=value`` options after a colon, as in
-``benchmarks/reward_ranking.py``.
+``benchmarks/probes/reward_ranking.py``.
 """
 
 from __future__ import annotations

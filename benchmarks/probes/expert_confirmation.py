@@ -1,6 +1,6 @@
 """The laptop Walker2d expert confirmation's rule, applied to its records.
 
-``python benchmarks/expert_confirmation.py`` reads the re-scored archives of
+``python benchmarks/probes/expert_confirmation.py`` reads the re-scored archives of
 docs/reports/walker-expert-confirmation/runs and prints, per arm, the corrected coverage,
 QD-Score and best return over seeds 5-7, the one-sided Welch test of the protocol
 (docs/expert-search-protocol.md, section 2), the best-return ratio and the coverage ratio
@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 from scipy import stats
 
-RUNS = Path(__file__).resolve().parents[1] / "docs/reports/walker-expert-confirmation/runs"
+RUNS = Path(__file__).resolve().parents[2] / "docs/reports/walker-expert-confirmation/runs"
 ARMS = {"recipe": "walker_ppga-seed{}", "candidate": "walker_ppga-db6436fa-seed{}"}
 SEEDS = (5, 6, 7)
 

@@ -1,6 +1,6 @@
 """The QD baselines protocol's reading, applied to its report (docs/qd-baselines-protocol.md).
 
-``python benchmarks/qd_baselines_reading.py`` reads docs/reports/walker-qd-baselines/runs.csv
+``python benchmarks/probes/qd_baselines_reading.py`` reads docs/reports/walker-qd-baselines/runs.csv
 (the corrected archives of PPGA, CMA-MAEGA (ES) and sep-CMA-MAE, seeds 5-7) and prints, per
 baseline and metric (corrected QD-Score, coverage, best return), the ratio of means to
 PPGA's with its 95 % bootstrap interval (qdil's ``ratio_of_means``: 10,000 resamples of
@@ -17,7 +17,7 @@ from scipy import stats
 
 from qdil.evaluation.ratios import ratio_of_means
 
-RUNS = Path(__file__).resolve().parents[1] / "docs/reports/walker-qd-baselines/runs.csv"
+RUNS = Path(__file__).resolve().parents[2] / "docs/reports/walker-qd-baselines/runs.csv"
 METRICS = {"qd_score": "QD-Score", "coverage_pct": "coverage", "obj_max": "best"}
 BASELINES = ("CMA-MAEGA (ES)", "sep-CMA-MAE")
 
