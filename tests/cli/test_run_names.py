@@ -92,7 +92,7 @@ def test_fit_makes_the_run_directory_under_that_name(tmp_path: Path, monkeypatch
     class Built(Exception):
         pass
 
-    def build(init, name, run_dir, resolved, *, resume):
+    def build(init, name, run_dir, resolved, *, resume, tracker=None):
         seen.update(name=name, run_dir=run_dir)
         raise Built
 
