@@ -112,6 +112,11 @@ class FinishedRun:
 
         return ReplaySettings.of_run(self.run_dir)
 
+    @cached_property
+    def _action_space(self) -> Any:
+        """The task's action space (bounds), read once: each policy maps into it."""
+        return self.make_env(1).single_action_space
+
     def make_env(self, num_envs: int = 1, num_threads: int | None = None) -> LocomotionVectorEnv:
         """The task as the run plays it (horizon, options, integrator), equal to gymnasium's.
 
@@ -148,7 +153,7 @@ class FinishedRun:
     def _policy(self, elites: dict[str, np.ndarray], row: int) -> GaitPolicy:
         from qdil.export import GaitPolicy
 
-        space = self.make_env(1).single_action_space
+        space = self._action_space
         return GaitPolicy(
             elites["solution"][row],
             elites["obs_mean"][row],
