@@ -1,8 +1,10 @@
 """Rules of the repository: the README's commands and CI stay in step, report records are
-committable, and every Python file stays short."""
+committable and held once, the tree travels to a GPU, and every Python file stays short."""
 
 from __future__ import annotations
 
+import importlib.util
+import os
 import re
 import shutil
 import subprocess
@@ -11,6 +13,18 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
+TOOLS = ROOT / "tools"
+
+
+def git_files() -> set[Path]:
+    """The tracked files of the checkout (skips the test where there is no git checkout)."""
+    if shutil.which("git") is None or not (ROOT / ".git").exists():
+        pytest.skip("needs git and a checkout")
+    listed = subprocess.run(
+        ["git", "ls-files", "-z"], cwd=ROOT, check=True, capture_output=True, text=True
+    ).stdout.split("\0")
+    # a broken link is listed too (lexists), so that the link test can name it
+    return {ROOT / name for name in listed if name and os.path.lexists(ROOT / name)}
 
 
 def readme_commands() -> list[str]:
@@ -61,7 +75,7 @@ def test_every_python_file_is_under_400_lines() -> None:
     if shutil.which("git") is None or not (ROOT / ".git").exists():
         pytest.skip("needs git and a checkout")
     listed = subprocess.run(
-        ["git", "ls-files", "-z", "--", "src", "tests", "benchmarks"],
+        ["git", "ls-files", "-z", "--", "src", "tests", "benchmarks", "tools"],
         cwd=ROOT,
         check=True,
         capture_output=True,
@@ -85,3 +99,53 @@ def test_user_pages_cite_no_tracker_issue_numbers() -> None:
         if (found := re.findall(r"\b[Ii]ssues? #?\d+", page.read_text()))
     }
     assert not cited, cited
+
+
+def _link_duplicates():
+    spec = importlib.util.spec_from_file_location("link_duplicates", TOOLS / "link_duplicates.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_report_records_are_held_once_and_their_links_resolve_inside_the_repository() -> None:
+    """A run recorded by several reports is kept once (``tools/link_duplicates.py``), and
+    every link of the tracked tree points to a tracked file beside it, so a clone reads them."""
+    groups = _link_duplicates().duplicates(ROOT / "docs" / "reports")
+    assert not groups, (
+        f"{len(groups)} files are held more than once, e.g. {[str(p) for p in groups[0]]}: "
+        "run python tools/link_duplicates.py docs/reports"
+    )
+    tracked = git_files()
+    for path in tracked:
+        if path.is_symlink():
+            target = path.resolve()
+            assert target.is_file() and target.is_relative_to(ROOT), f"{path} -> {target}"
+            assert target in tracked, f"{path} points to {target}, which git does not track"
+
+
+def test_the_tracked_tree_leaves_half_of_a_gpu_call_for_wheels() -> None:
+    """A call of the GPU machine carries the tree and wheels in 64 MiB (docs/guides/gpu.md):
+    the tree stays under 32 MiB, links counted as links."""
+    size = sum(path.lstat().st_size for path in git_files())
+    assert size <= 32 * 2**20, (
+        f"the tracked tree is {size / 2**20:.1f} MiB: keep records light (gzipped tables, "
+        "one copy of each run: tools/link_duplicates.py)"
+    )
+
+
+def test_link_duplicates_keeps_the_first_added_copy_and_links_the_rest(tmp_path: Path) -> None:
+    module = _link_duplicates()
+    data = bytes(range(256)) * 8
+    (tmp_path / "a" / "run").mkdir(parents=True)
+    (tmp_path / "b" / "run").mkdir(parents=True)
+    (tmp_path / "a" / "run" / "metrics.csv.gz").write_bytes(data)
+    (tmp_path / "b" / "run" / "metrics.csv.gz").write_bytes(data)
+    (tmp_path / "b" / "run" / "other.csv.gz").write_bytes(data[::-1])
+    assert module.main([str(tmp_path), "--check"]) == 1
+    assert module.main([str(tmp_path)]) == 0
+    linked = tmp_path / "b" / "run" / "metrics.csv.gz"
+    assert linked.is_symlink() and linked.read_bytes() == data
+    assert str(linked.readlink()) == "../../a/run/metrics.csv.gz"  # relative: clones read it
+    assert not (tmp_path / "b" / "run" / "other.csv.gz").is_symlink()
+    assert module.main([str(tmp_path), "--check"]) == 0

@@ -25,6 +25,7 @@ import numpy as np
 import yaml
 
 from qdil.evaluation.runs import read_curves
+from qdil.files import table_path
 
 RECORDS = Path(__file__).resolve().parents[2] / "docs/reports/absorbing-evidence/runs"
 # episodes per elite per task: 5, and 10 on Humanoid once the 1 % rule fired on its first run
@@ -142,7 +143,7 @@ def training(run_dir: Path, since: int = 2) -> Training:
     Raises:
         ValueError: no ``metrics.csv``, or no row from ``since`` on.
     """
-    path = run_dir / "metrics.csv"
+    path = table_path(run_dir / "metrics.csv")  # a record's is gzipped
     if not path.is_file():
         raise ValueError(f"{run_dir}: no metrics.csv; is it a run folder of qdil fit?")
     curves = read_curves(path)

@@ -15,10 +15,12 @@ import csv
 import math
 from pathlib import Path
 
+from qdil.files import open_table
+
 
 def reading(run: Path, at: list[int]) -> str:
     """One table row of the run in ``run``."""
-    with open(run / "metrics.csv", newline="") as file:
+    with open_table(run / "metrics.csv") as file:  # a record's is gzipped
         rows = [row for row in csv.DictReader(file)]
     value = {int(r["iteration"]): r for r in rows}
     best, bests = -math.inf, {}

@@ -16,6 +16,8 @@ import csv
 import statistics
 from pathlib import Path
 
+from qdil.files import open_table
+
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
@@ -27,7 +29,7 @@ def main() -> None:
     print("|---|---|---|---|---|---|---|")
     summaries = []
     for run in args.runs:
-        with open(run / "metrics.csv", newline="") as file:
+        with open_table(run / "metrics.csv") as file:  # a record's is gzipped
             rows = list(csv.DictReader(file))
         figures = [
             {

@@ -3,7 +3,8 @@
 :func:`atomic_write` writes to a temporary file in the target's folder, flushes it to disk and
 renames it over the target, so a crash at any moment leaves either the old file or the new
 one, never half of one. A write killed before its rename leaves its temporary file behind;
-:func:`remove_stale_temporaries` deletes those of processes that no longer run.
+:func:`remove_stale_temporaries` deletes those of processes that no longer run. A report's
+records keep their tables gzipped (:func:`write_gzipped`); :func:`open_table` reads either.
 
 Only the standard library: this module sits below everything that writes files (the QD loop,
 its checkpoints, the tracker, demonstration files), so it must import none of them.
@@ -11,6 +12,7 @@ its checkpoints, the tracker, demonstration files), so it must import none of th
 
 from __future__ import annotations
 
+import gzip
 import os
 import re
 from collections.abc import Callable
@@ -22,6 +24,26 @@ CONFIG_NAME = "config.yaml"
 
 # atomic_write's temporary files: ".<name>.tmp-<pid>"
 TEMPORARY = re.compile(r"^\..+\.tmp-(\d+)$")
+
+
+def table_path(path: Path) -> Path:
+    """``path``, or ``path`` + ``.gz`` where only the gzipped table is kept (a record's)."""
+    gzipped = path.with_name(path.name + ".gz")
+    return gzipped if not path.exists() and gzipped.exists() else path
+
+
+def open_table(path: Path) -> IO[str]:
+    """Open a CSV table as text for :mod:`csv`, plain or gzipped (:func:`table_path`)."""
+    path = table_path(path)
+    if path.suffix == ".gz":
+        return gzip.open(path, "rt", newline="")
+    return open(path, newline="")
+
+
+def write_gzipped(path: Path, data: bytes) -> None:
+    """Write ``data`` gzipped to ``path``, the same bytes for the same data (no timestamp)."""
+    with open(path, "wb") as raw, gzip.GzipFile("", "wb", 9, raw, mtime=0) as file:
+        file.write(data)
 
 
 def atomic_write(path: Path, write: Callable[[IO[bytes]], object]) -> None:

@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Any
 
 import yaml
 
-from qdil.files import CONFIG_NAME
+from qdil.files import CONFIG_NAME, open_table, table_path
 from qdil.recipe_load import RecipeError
 
 if TYPE_CHECKING:
@@ -68,10 +68,10 @@ class FinishedRun:
 
     def metrics(self) -> list[dict[str, float]]:
         """Every logged iteration's metrics (``metrics.csv``), oldest first; empty cells NaN."""
-        path = self.run_dir / "metrics.csv"
+        path = table_path(self.run_dir / "metrics.csv")  # a record keeps it gzipped
         if not path.is_file():
             return []
-        with open(path, newline="") as file:
+        with open_table(path) as file:
             return [
                 {key: float(value) if value not in ("", None) else float("nan")
                  for key, value in row.items()}

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import gzip
 import io
 import json
 import pickle
@@ -19,6 +20,7 @@ from scipy.stats import tukey_hsd
 
 from qdil.evaluation.report import write_report
 from qdil.evaluation.runs import collect_runs
+from qdil.files import write_gzipped
 from tests.commands import SMOKE, qdil_here
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
@@ -209,6 +211,14 @@ def test_records_remake_the_same_report_without_checkpoints(
     )
     assert not list(kept.rglob("*.pt")) and not list(kept.rglob("*.pkl"))
     assert (kept / "airl0" / "eval.json").is_file() and not (kept / "true0" / "eval.json").exists()
+    # both tables are kept gzipped (records travel with the repository), the metrics byte
+    # for byte the run's, the same bytes each time they are written
+    assert not (kept / "airl0" / "metrics.csv").exists()
+    metrics = (kept / "airl0" / "metrics.csv.gz").read_bytes()
+    assert gzip.decompress(metrics) == (made.runs / "airl0" / "metrics.csv").read_bytes()
+    write_gzipped(tmp_path / "again.gz", gzip.decompress(metrics))
+    assert (tmp_path / "again.gz").read_bytes() == metrics
+    assert gzip.decompress((kept / "airl0" / "archive.csv.gz").read_bytes()).startswith(b"index,")
     # the records alone, moved elsewhere, give the same tables
     moved = shutil.copytree(kept, tmp_path / "records")
     again = write_report([moved], tmp_path / "again")
@@ -340,7 +350,7 @@ def test_an_unreadable_record_is_left_out_with_its_reason(
     made: SimpleNamespace, tmp_path: Path
 ) -> None:
     record = shutil.copytree(made.out / "runs" / "true0", tmp_path / "true0")
-    (record / "archive.csv").unlink()
+    (record / "archive.csv.gz").unlink()
     (run,) = collect_runs([record])
     assert run.status == "left out" and "record unreadable" in run.problems[0]
 

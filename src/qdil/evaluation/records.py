@@ -9,6 +9,7 @@ report outlives the machine that trained its runs: docs/guides/reproduce-paper-r
 from __future__ import annotations
 
 import csv
+import io
 import json
 import shutil
 from dataclasses import dataclass, field
@@ -18,13 +19,14 @@ import numpy as np
 from ribs.archives import GridArchive
 
 from qdil.evaluation.rescore import EVAL_JSON
-from qdil.files import CONFIG_NAME
+from qdil.files import CONFIG_NAME, open_table, write_gzipped
 from qdil.provenance import PROVENANCE_JSON
 
 RECORD_JSON = "record.json"
-ARCHIVE_CSV = "archive.csv"
+ARCHIVE_CSV = "archive.csv"  # kept as archive.csv.gz
+METRICS_CSV = "metrics.csv"  # kept as metrics.csv.gz
 RECORD_FORMAT = 1
-COPIED = (CONFIG_NAME, "metrics.csv", EVAL_JSON, PROVENANCE_JSON)
+COPIED = (CONFIG_NAME, EVAL_JSON, PROVENANCE_JSON)
 
 
 @dataclass
@@ -90,6 +92,8 @@ def write_record(run_dir: Path, record: Record, dest: Path, made_by: dict) -> Pa
     for name in COPIED:
         if (run_dir / name).is_file():
             shutil.copy2(run_dir / name, tmp / name)
+    if (run_dir / METRICS_CSV).is_file():
+        write_gzipped(tmp / f"{METRICS_CSV}.gz", (run_dir / METRICS_CSV).read_bytes())
     archive = record.archive
     summary = {
         "format": RECORD_FORMAT,
@@ -109,14 +113,15 @@ def write_record(run_dir: Path, record: Record, dest: Path, made_by: dict) -> Pa
     }
     (tmp / RECORD_JSON).write_text(json.dumps(summary, indent=1) + "\n")
     data = archive.data(["index", "objective", "measures"])
-    with open(tmp / ARCHIVE_CSV, "w", newline="") as file:
-        writer = csv.writer(file)
-        k = len(archive.dims)
-        writer.writerow(["index", "objective", *[f"measures_{j}" for j in range(k)]])
-        for index, objective, measures in zip(
-            data["index"], data["objective"], data["measures"], strict=True
-        ):
-            writer.writerow([int(index), repr(float(objective)), *map(repr, map(float, measures))])
+    table = io.StringIO(newline="")
+    writer = csv.writer(table)
+    k = len(archive.dims)
+    writer.writerow(["index", "objective", *[f"measures_{j}" for j in range(k)]])
+    for index, objective, measures in zip(
+        data["index"], data["objective"], data["measures"], strict=True
+    ):
+        writer.writerow([int(index), repr(float(objective)), *map(repr, map(float, measures))])
+    write_gzipped(tmp / f"{ARCHIVE_CSV}.gz", table.getvalue().encode())
     return _swap(tmp, dest)
 
 
@@ -156,7 +161,7 @@ def read_record(path: Path) -> Record:
         summary = json.loads((path / RECORD_JSON).read_text())
         metrics = {key: float(value) for key, value in summary["metrics"].items()}
         dims, ranges = summary["dims"], summary["ranges"]
-        with open(path / ARCHIVE_CSV, newline="") as file:
+        with open_table(path / ARCHIVE_CSV) as file:  # gzipped, or plain in older records
             rows = list(csv.reader(file))[1:]
         values = np.array(rows, dtype=np.float64).reshape(len(rows), 2 + len(dims))
     except (OSError, ValueError, KeyError, TypeError) as error:

@@ -27,7 +27,7 @@ from qdil.envs.tasks import changed_for_task
 from qdil.evaluation.methods import DISPLAY_NAMES, method_label
 from qdil.evaluation.records import RecordError, is_record, read_record
 from qdil.evaluation.rescore import CORRECTED, EVAL_JSON
-from qdil.files import CONFIG_NAME
+from qdil.files import CONFIG_NAME, open_table, table_path
 from qdil.provenance import PROVENANCE_JSON, mixed_vendors_note
 from qdil.qd.archives import QD_OFFSETS, qd_metrics, true_keyed
 from qdil.qd.checkpoint import CheckpointError, load_archives
@@ -157,12 +157,12 @@ def read_curves(path: Path) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """Columns of ``metrics.csv`` against iteration; a repeated iteration keeps its last row.
 
     Args:
-        path: the ``metrics.csv`` file.
+        path: the ``metrics.csv`` file (or a record's ``metrics.csv.gz``).
 
     Returns:
         Column -> ``(iterations, values)``, shapes ``(T,)``; missing cells are NaN.
     """
-    with open(path, newline="") as file:
+    with open_table(path) as file:
         rows = list(csv.DictReader(file))
     by_iteration = {int(float(row["iteration"])): row for row in rows if row.get("iteration")}
     steps = np.array(sorted(by_iteration), dtype=np.int64)
@@ -302,7 +302,7 @@ def load_run(path: Path, label: str | None = None) -> RunResult:
     run.method, run.labelled, run.config = label or method_label(config), bool(label), config
     run.seed = config.get("seed")
     run.target = (config.get("qd") or {}).get("iterations")
-    metrics_path = path / METRICS_NAME
+    metrics_path = table_path(path / METRICS_NAME)  # a record keeps it gzipped
     if metrics_path.exists():
         run.curves = read_curves(metrics_path)
     if not run.curves:
