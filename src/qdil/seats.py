@@ -109,7 +109,8 @@ class SearchEmitter(Seat):
     pyribs' emitter duties (``ask_dqd``, ``tell_dqd``, ``ask``, ``tell``, ``batch_size``,
     ``archive``) plus what the loop needs to score θ_μ and its branches in one batch and to
     walk θ_μ: ``propose(jacobian)`` (the branches the next ``ask`` returns), ``theta`` and
-    ``theta_fields`` (θ_μ and its observation statistics, readable and writable),
+    ``theta_fields`` (θ_μ and its observation statistics, read), ``move(solution, fields)``
+    (θ_μ moves to where the walk ended: the one way the loop changes it),
     ``coefficient_mean`` (the walk's weights, (k+1,)) and ``restarts`` (a counter).
     """
 
@@ -125,6 +126,7 @@ class SearchEmitter(Seat):
         "propose",
         "theta",
         "theta_fields",
+        "move",
         "coefficient_mean",
         "restarts",
     )

@@ -107,7 +107,7 @@ def test_improvement_adapts_the_strategy_without_restarting(archive) -> None:
 
 def test_restart_with_an_empty_archive_keeps_theta(archive) -> None:
     emitter = make_emitter(archive)
-    emitter.theta = np.ones(DIM)
+    emitter.move(np.ones(DIM), emitter.theta_fields)
     tell_round(emitter, archive, status=np.zeros(8))
     assert emitter.restarts == 1
     np.testing.assert_array_equal(emitter.theta, 1.0)
@@ -128,7 +128,7 @@ def test_works_inside_a_pyribs_scheduler(archive) -> None:
             rng.uniform(0, 1, (len(branches), 2)),
             **fields(len(branches)),
         )
-        emitter.theta = theta[0] + 0.1
+        emitter.move(theta[0] + 0.1, emitter.theta_fields)
     assert len(archive) > 5
 
 

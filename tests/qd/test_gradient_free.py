@@ -78,8 +78,8 @@ def test_a_bandit_scheduler_over_a_pool_of_emitters_runs_and_resumes(
         (["--qd.emitter", "qdil.qd.EvolutionStrategyEmitter",
           "--qd.emitter.init_args.sigma0", "0.1"],
          "qd.emitter: qdil.qd.es_emitter.EvolutionStrategyEmitter is not a search emitter: it "
-         "lacks propose, theta, theta_fields, coefficient_mean (a gradient-free one runs with "
-         "rl: null)"),
+         "lacks propose, theta, theta_fields, move, coefficient_mean (a gradient-free one runs "
+         "with rl: null)"),
         (["--qd.emitters", "2"], "qd.emitters=2: a gradient estimator walks one search emitter"),
         ([*SEP, "--reward", "airl"], "rl: null: the reward model needs log-probs"),
     ],

@@ -71,6 +71,7 @@ def test_qdils_and_pyribs_classes_fill_the_seats_they_fit() -> None:
         "propose",
         "theta",
         "theta_fields",
+        "move",
         "coefficient_mean",
     ]
     assert SearchScheduler.lacking(BanditScheduler) == ["emitters"]
@@ -89,7 +90,7 @@ def test_qdils_and_pyribs_classes_fill_the_seats_they_fit() -> None:
          "setup, compute_jacobian, walk, state_dict, load_state_dict"),
         ("--qd.emitter", "ribs.emitters.EvolutionStrategyEmitter", "qd.emitter: "
          "ribs.emitters._evolution_strategy_emitter.EvolutionStrategyEmitter is not a search "
-         "emitter: it lacks propose, theta, theta_fields, coefficient_mean"),
+         "emitter: it lacks propose, theta, theta_fields, move, coefficient_mean"),
         ("--qd.scheduler", "ribs.schedulers.BanditScheduler", "qd.scheduler: "
          "ribs.schedulers._bandit_scheduler.BanditScheduler is not a search scheduler: it "
          "lacks emitters (a gradient-free one runs with rl: null)"),

@@ -176,9 +176,16 @@ class PPGAEmitter(EmitterBase):
         """(D,) the search policy θ_μ."""
         return self._theta
 
-    @theta.setter
-    def theta(self, value: np.ndarray) -> None:
-        self._theta = np.asarray(value, dtype=self._theta.dtype).reshape(self._theta.shape)
+    def move(self, solution: np.ndarray, fields: dict[str, np.ndarray]) -> None:
+        """θ_μ moves to where the estimator's walk ended (PPGA's outer step).
+
+        Args:
+            solution: (D,) the walked θ_μ.
+            fields: its observation statistics (``obs_mean`` (obs_dim,), ``obs_var``
+                (obs_dim,), ``obs_count`` ()), the archive's extra fields of θ_μ.
+        """
+        self._theta = np.asarray(solution, dtype=self._theta.dtype).reshape(self._theta.shape)
+        self.theta_fields = dict(fields)
 
     @property
     def coefficient_mean(self) -> np.ndarray:

@@ -190,10 +190,8 @@ def qd_iteration(run: Run) -> dict[str, float]:
         train_reward,
         state.next_seed(),
     )
-    emitter.theta = walk.solutions[0]
-    emitter.theta_fields = {
-        k: v[0] for k, v in fields_from_stats(walk.stats, [0.0]).items() if k != "length"
-    }
+    walked = fields_from_stats(walk.stats, [0.0])
+    emitter.move(walk.solutions[0], {k: v[0] for k, v in walked.items() if k != "length"})
     timings["walk"] = time.perf_counter() - tic_walk
 
     # ---- 4. reward model update (once per iteration, on this iteration's policy data);

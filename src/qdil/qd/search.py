@@ -75,10 +75,11 @@ def make_search(
         if problem:
             raise ValueError(f"{key}: {problem}")
     emitter = emitters[0]
-    theta_stats = RunningMeanStd(1, (obs_dim,))
-    emitter.theta_fields = {
+    theta_stats = RunningMeanStd(1, (obs_dim,))  # θ_0 has seen no observation yet
+    fields = {
         "obs_mean": theta_stats.mean[0].numpy(),
         "obs_var": theta_stats.var[0].numpy(),
         "obs_count": theta_stats.count[0].numpy(),
     }
+    emitter.move(emitter.theta, fields)
     return emitter, scheduler
