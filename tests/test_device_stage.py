@@ -1,0 +1,67 @@
+"""tools/device_stage.py and tools/device_receive.sh: what travels to the GPU machine, and
+that parts carried one call at a time unpack into the same files."""
+
+from __future__ import annotations
+
+import importlib.util
+import os
+import shutil
+import subprocess
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _tool():
+    spec = importlib.util.spec_from_file_location("device_stage", ROOT / "tools/device_stage.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_what_is_staged_is_what_the_machine_lacks() -> None:
+    staged = _tool().needed()
+    for name in ("warp-lang", "mujoco-warp", "mujoco", "ribs", "gymnasium", "ray", "sybil"):
+        assert name in staged, name  # the physics, the archives, the tasks, packed trials
+    assert "jsonargparse" in staged and "typeshed-client" in staged  # followed through
+    for name in ("torch", "lightning", "numpy", "numba", "scipy", "wandb", "qdil"):
+        assert name not in staged, name  # the machine's own, left out, or the tree's src/
+
+
+@pytest.mark.skipif(shutil.which("xz") is None or shutil.which("git") is None, reason="xz, git")
+def test_parts_carried_one_call_at_a_time_unpack_into_the_same_site(tmp_path: Path) -> None:
+    site = tmp_path / "site"
+    (site / "pkg").mkdir(parents=True)
+    (site / "pkg" / "__init__.py").write_text("VALUE = 1\n")
+    (site / "pkg" / "data.bin").write_bytes(os.urandom(5000))  # incompressible: several parts
+    out = tmp_path / "stage"
+    out.mkdir()
+    plan = _tool().pack(site, out, room=2000, plan={"packages": {}})
+    assert plan["parts"] >= 3
+    machine = {  # the machine's /tmp, kept between calls
+        "QDIL_STAGE_STORE": str(tmp_path / "machine" / "store"),
+        "QDIL_STAGE_SITE": str(tmp_path / "machine" / "site"),
+    }
+    for k in range(1, plan["parts"] + 1):
+        call = tmp_path / f"call{k}"  # the tree a call carries: the script and one part
+        (call / "tools").mkdir(parents=True)
+        shutil.copy(ROOT / "tools" / "device_receive.sh", call / "tools")
+        shutil.copytree(out / f"call-{k:02d}", call / ".stage" / f"call-{k:02d}")
+        done = subprocess.run(
+            ["bash", "tools/device_receive.sh"],
+            cwd=call,
+            env=os.environ | machine,
+            capture_output=True,
+            text=True,
+        )
+        assert done.returncode == (0 if k == plan["parts"] else 3), done.stdout + done.stderr
+    unpacked = Path(machine["QDIL_STAGE_SITE"])
+    assert (unpacked / "pkg" / "data.bin").read_bytes() == (site / "pkg" / "data.bin").read_bytes()
+    assert (unpacked / "pkg" / "__init__.py").read_text() == "VALUE = 1\n"
+    again = subprocess.run(
+        ["bash", "tools/device_receive.sh"], cwd=call, env=os.environ | machine, text=True,
+        capture_output=True,
+    )  # fmt: skip
+    assert again.returncode == 0 and "staged already" in again.stdout
