@@ -2,7 +2,7 @@
 
 One command on a machine with a CUDA GPU and the warp extra::
 
-    python benchmarks/gpu_check.py --out gpu_check
+    python -m benchmarks.gpu_check --out gpu_check
 
 runs its steps in the order of their value, in steady state (kernels compiled and Warp
 graphs recorded before any clock runs), until its budget (480 s) is spent:
@@ -22,7 +22,7 @@ graphs recorded before any clock runs), until its budget (480 s) is spent:
 6. ``packed``: two seeds as one ``qdil sweep`` at half a GPU per trial, against one alone;
 7. ``repeatability``: how far a training rollout and an evaluation land from themselves when
    played again (eagerly, from a CUDA graph, narrowed or not);
-8. the probes of ``benchmarks/gpu_probes.py``, measured on an H200 on 2026-11-27: ``breakdown``
+8. the probes of ``benchmarks/gpu/probes.py``, measured on an H200 on 2026-11-27: ``breakdown``
    (one training step's Warp sequences and torch operators at N = 3,000), ``floor`` (one frame
    skip at N = 1 to 16,384), ``throughput`` (rollout env-steps/s), ``syncs`` (host syncs per
    step), and the iterations without narrowing (``iterations_wide``) and graphed
@@ -50,9 +50,11 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))  # the modules beside this file
-from bench_integrators import TASKS, step_costs
-from gpu_probes import (
+if not __package__:  # run as a file, the package beside it is out of reach
+    sys.exit("run the GPU check from the repository's root: python -m benchmarks.gpu_check ...")
+
+from benchmarks.bench_integrators import TASKS, step_costs
+from benchmarks.gpu.probes import (
     frame_skip_floor,
     machine,
     repeatability,
@@ -60,8 +62,14 @@ from gpu_probes import (
     rollout_throughput,
     step_breakdown,
 )
-from gpu_runs import RECIPES, gpu_tests, packed_trials, qd_iterations, runs_side_by_side
-from gpu_tables import markdown
+from benchmarks.gpu.runs import (
+    RECIPES,
+    gpu_tests,
+    packed_trials,
+    qd_iterations,
+    runs_side_by_side,
+)
+from benchmarks.gpu.tables import markdown
 
 MEASURED = ("iterations_in_turns", "side_by_side")
 """Steps left out unless asked for: measured (docs/guides/gpu.md), and 4 minutes together."""
@@ -126,7 +134,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     sizes = [6, 24] if args.quick else [1024, 4096, 16384]
     turns = 3 if args.quick else 3000  # the larger of the two groups: room for one at a time
     n = 6 if args.quick else 3000
-    command = "python benchmarks/gpu_check.py " + " ".join(argv or sys.argv[1:])
+    command = "python -m benchmarks.gpu_check " + " ".join(argv or sys.argv[1:])
     info = machine(args.device)
     result: dict[str, Any] = earlier(args.out, info["card"], args.fresh)
     result |= {"command": command.strip(), "device": args.device, "machine": info, "errors": {}}

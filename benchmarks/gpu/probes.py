@@ -16,7 +16,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-RECIPE = Path(__file__).resolve().parents[1] / "recipes" / "gpu" / "walker_mcwae.yaml"
+RECIPE = Path(__file__).resolve().parents[2] / "recipes" / "gpu" / "walker_mcwae.yaml"
 
 
 def _sync(device: str) -> Callable[[], None]:

@@ -4,9 +4,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from gpu_probes import repeatability_table
-from gpu_runs import PHASES
-
+from benchmarks.gpu.probes import repeatability_table
+from benchmarks.gpu.runs import PHASES
 from qdil.envs.integrators import INTEGRATORS
 
 

@@ -16,9 +16,9 @@ from pathlib import Path
 from typing import Any
 from unittest import mock
 
-from gpu_probes import RECIPE
+from benchmarks.gpu.probes import RECIPE
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 GPU_TESTS = ["tests/test_gpu.py", "tests/envs/test_warp_backend.py"]
 PHASES = ("jacobian", "walk", "evaluate", "reward_update")
 RECIPES = {
