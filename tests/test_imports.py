@@ -151,6 +151,7 @@ FLOORS = (
         "qdil.numerics",
         "qdil.provenance",
         "qdil.reductions",
+        "qdil.timing",
         "qdil.upgrades",
     ),
     ("qdil.envs", "qdil.rl", "qdil.executors", "qdil.demos", "qdil.rewards", "qdil.seats"),

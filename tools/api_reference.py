@@ -80,10 +80,13 @@ SECTIONS = [
         ],
     ),
     (
-        "Tracking and export",
-        "Where metrics go, and how gaits leave qdil.",
+        "Tracking, timing and export",
+        "Where metrics go, where an iteration's time goes, and how gaits leave qdil.",
         [
             ("qdil.tracking.Tracker", "qdil.tracking.Tracker"),
+            ("qdil.timing.recording", "qdil.timing.recording"),
+            ("qdil.timing.section", "qdil.timing.section"),
+            ("qdil.timing.timed", "qdil.timing.timed"),
             ("qdil.export.export_policies", "qdil.export.policies.export_policies"),
             ("qdil.export.GaitPolicy", "qdil.export.policy.GaitPolicy"),
             ("qdil.export.ExportedPolicy", "qdil.export.policies.ExportedPolicy"),

@@ -45,6 +45,7 @@ from typing_extensions import override
 
 from qdil.envs.mujoco_c import MUJOCO_C, cached_njit, call_pp, call_ppi, call_ppii
 from qdil.envs.physics_base import Export, PhysicsBatch, reset_ids
+from qdil.timing import PHYSICS, timed
 
 # The kernels call MuJoCo through the addresses in ``c`` (qdil.envs.mujoco_c.MUJOCO_C), not
 # through ctypes globals, so that numba caches them on disk. numba rebuilds a cached kernel
@@ -233,6 +234,7 @@ class MujocoBatch(PhysicsBatch):
         return np.array([getattr(d, field).ctypes.data for d in self.datas], dtype=np.int64)
 
     @override
+    @timed(PHYSICS)
     def step(
         self,
         ctrl: np.ndarray,
@@ -284,6 +286,7 @@ class MujocoBatch(PhysicsBatch):
             torch.set_num_threads(torch_threads)
 
     @override
+    @timed(PHYSICS)
     def reset(self, ids: np.ndarray, qpos: np.ndarray, qvel: np.ndarray) -> None:
         # the step kernel with no simulation stepping: one kernel serves both
         self.step(self._idle_ctrl, 0, self._none, reset=(ids, qpos, qvel))

@@ -15,6 +15,8 @@ from dataclasses import dataclass
 import numpy as np
 from ribs.archives import ArchiveBase, CVTArchive, GridArchive
 
+from qdil.timing import ARCHIVE_WORK, timed
+
 QD_OFFSETS: dict[str, float] = {
     "Walker2d-v5": 1.413,
     "HalfCheetah-v5": 9.231,
@@ -123,6 +125,7 @@ class RunArchives:
     true: GridArchive
     deployable: GridArchive
 
+    @timed(ARCHIVE_WORK)
     def add(
         self,
         solutions: np.ndarray,

@@ -44,6 +44,7 @@ from qdil.qd.vppo import walk_rewards
 from qdil.reductions import sum_over
 from qdil.rl.episodes import Evaluation
 from qdil.rl.normalize import RunningMeanStd, fields_from_stats, stats_from_fields
+from qdil.timing import ARCHIVE_WORK, REWARD_MODEL, section
 
 if TYPE_CHECKING:
     from qdil.qd.state import Run
@@ -84,7 +85,8 @@ class TrainReward:
 
     def __call__(self, rollout: Rollout) -> torch.Tensor:
         """(T, N) rewards of a training rollout (visits count toward the bonus)."""
-        rewards = self.run.reward.predict_reward(rollout, update=True)
+        with section(REWARD_MODEL):
+            rewards = self.run.reward.predict_reward(rollout, update=True)
         self.run.reward.check_finite(rewards, "rewards", self.run.state.iteration)
         valid = rollout.valid > 0
         self.total += float(sum_over(rewards[valid], 0))  # thread-invariant over 384,000 steps
@@ -120,7 +122,8 @@ def reward_functions(run: Run) -> tuple[TrainReward, Any]:
     train_reward = TrainReward(run, train_tail)
 
     def eval_reward(rollout: Rollout) -> torch.Tensor:
-        rewards = checked(reward.predict_reward(rollout))
+        with section(REWARD_MODEL):
+            rewards = checked(reward.predict_reward(rollout))
         return rewards if eval_tail is None else rewards + eval_tail(rollout)
 
     uses_true = run.qd.fitness == "true" or reward.is_true_reward
@@ -145,7 +148,8 @@ def qd_iteration(run: Run) -> dict[str, float]:
     tic = time.perf_counter()
 
     # ---- 1. gradients at θ_μ; the branches along them
-    theta = scheduler.ask_dqd()[0]
+    with section(ARCHIVE_WORK):
+        theta = scheduler.ask_dqd()[0]
     stats = stats_from_fields(emitter.theta_fields)
     jacobian_phase = estimator.compute_jacobian(theta, stats, train_reward, state.next_seed())
     jacobian = (jacobian_phase.solutions.astype(np.float64) - theta)[None]
@@ -167,15 +171,17 @@ def qd_iteration(run: Run) -> dict[str, float]:
     timings["evaluate"] = time.perf_counter() - tic_eval
     fields = fields_from_stats(stats, mean_eval.lengths)
     objective = _objective(run, mean_eval)  # the run's own: learned, or true with fitness true
-    with quiet_empty_archive():
+    with quiet_empty_archive(), section(ARCHIVE_WORK):
         scheduler.tell_dqd(objective, mean_eval.measures, jacobian, **fields)
     run.archives.add(theta[None], objective, mean_eval.true_objective, mean_eval.measures, fields)
-    if not np.array_equal(scheduler.ask(), branches):
+    with section(ARCHIVE_WORK):
+        asked = scheduler.ask()
+    if not np.array_equal(asked, branches):
         raise RuntimeError("the scheduler's ask() differs from the emitter's proposal")
     fields = fields_from_stats(branch_stats, evaluation.lengths)
     restarts = emitter.restarts
     objective = _objective(run, evaluation)
-    with quiet_empty_archive():
+    with quiet_empty_archive(), section(ARCHIVE_WORK):
         scheduler.tell(objective, evaluation.measures, **fields)
     run.archives.add(branches, objective, evaluation.true_objective, evaluation.measures, fields)
 
@@ -238,7 +244,8 @@ def gradient_free_iteration(run: Run) -> dict[str, float]:
     state, scheduler, qd = run.state, run.scheduler, run.qd
     train_reward, eval_reward = reward_functions(run)
     tic = time.perf_counter()
-    solutions = scheduler.ask()
+    with section(ARCHIVE_WORK):
+        solutions = scheduler.ask()
     stats = RunningMeanStd(len(solutions), (run.scorer.obs_dim,))
     rollouts: list[Rollout] = []
 
@@ -256,7 +263,7 @@ def gradient_free_iteration(run: Run) -> dict[str, float]:
     )
     fields = fields_from_stats(stats, evaluation.lengths)
     objective = _objective(run, evaluation)
-    with quiet_empty_archive():
+    with quiet_empty_archive(), section(ARCHIVE_WORK):
         scheduler.tell(objective, evaluation.measures, **fields)
     run.archives.add(solutions, objective, evaluation.true_objective, evaluation.measures, fields)
 
@@ -295,9 +302,10 @@ def _walk_survival(
 
 def _update_reward(run: Run, expert: Any, policy: TransitionBatch) -> dict[str, float]:
     """The reward model's once-per-iteration update (decision D3), its metrics checked finite."""
-    reward_metrics = run.reward.update(expert, policy, run.state.iteration)
-    if run.reward.absorbing:
-        run.reward.price_absorbing(policy)
+    with section(REWARD_MODEL):
+        reward_metrics = run.reward.update(expert, policy, run.state.iteration)
+        if run.reward.absorbing:
+            run.reward.price_absorbing(policy)
     for key, value in reward_metrics.items():
         run.reward.check_finite(torch.as_tensor(value), f"update metric {key}", run.state.iteration)
     return reward_metrics

@@ -19,6 +19,7 @@ from qdil.rl.collect import PolicyData
 from qdil.rl.gae import compute_gae
 from qdil.rl.networks import VectorizedActor, VectorizedCritic
 from qdil.rl.normalize import RunningMeanStd
+from qdil.timing import PPO_UPDATES, timed
 
 
 @dataclass(frozen=True)
@@ -104,6 +105,7 @@ def next_state_values(
     return shifted.reshape(num_policies, rows).scatter(1, index, final)
 
 
+@timed(PPO_UPDATES)
 def ppo_update(
     settings: PPOSettings,
     generator: torch.Generator,

@@ -17,6 +17,7 @@ import torch
 from qdil.rl.inference import RowwisePolicies
 from qdil.rl.networks import VectorizedActor
 from qdil.rl.normalize import RunningMeanStd
+from qdil.timing import POLICY_INFERENCE, timed
 
 # log √(2π), the Gaussian's log-normaliser per dimension, exactly as torch's Normal writes it
 _LOG_SQRT_2PI = math.log(math.sqrt(2 * math.pi))
@@ -69,6 +70,7 @@ class PolicySampler:
                 obs_clip,
             )
 
+    @timed(POLICY_INFERENCE)
     def sample(
         self,
         obs: torch.Tensor,
