@@ -1,24 +1,33 @@
 """The QD loop's seats: what a gradient estimator, an emitter and a scheduler must offer it.
 
-Each seat is a small abstract class that checks structure, not ancestry: a class fits when
-it (or a base) defines every member the seat lists, so pyribs' classes and a plugin's fit
-without inheriting from qdil. The recipe schema types ``rl``, ``qd.emitter`` and
-``qd.scheduler`` with them; :func:`seat_problem` says what a class lacks. Who does what, and
-why: docs/concepts/seats.md.
+Each seat declares its members once, with their signatures. At run time a seat is a small
+abstract class that checks structure, not ancestry: a class fits when it (or a base)
+defines every member, so pyribs' classes and a plugin's fit without inheriting from qdil;
+the recipe schema types ``rl``, ``qd.emitter`` and ``qd.scheduler`` with them and
+:func:`seat_problem` says what a class lacks. A type checker reads the same classes as
+protocols (``typing.Protocol``), so it checks the signatures too: ``.ci/run`` runs
+basedpyright over ``tests/static/seats_fit.py``. Who does what, and why:
+docs/concepts/seats.md.
 """
 
 from __future__ import annotations
 
 from abc import ABC
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
 from ribs.archives import ArchiveBase
 
 if TYPE_CHECKING:
     import numpy as np
+    import torch
+    from ribs.typing import Int
 
     from qdil.data import Rollout
+    from qdil.envs.vector import LocomotionVectorEnv
+    from qdil.executors import Executor
+    from qdil.rl.collect import RewardFn
     from qdil.rl.normalize import RunningMeanStd
 
 
@@ -43,10 +52,23 @@ class PhaseResult:
 
 
 class Seat(ABC):  # noqa: B024 - no abstract methods: the members are checked by name
-    """A place in the loop that any class with the listed members fills."""
+    """A place in the loop that any class with the seat's members fills.
+
+    A seat's members are the methods and properties its body declares (and its bases'),
+    in their order; :meth:`lacking` looks for them by name.
+    """
 
     title: ClassVar[str] = "component"
     members: ClassVar[tuple[str, ...]] = ()
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        declared = [
+            name
+            for name, value in vars(cls).items()
+            if not name.startswith("_") and (callable(value) or isinstance(value, property))
+        ]
+        cls.members = tuple(dict.fromkeys([*cls.members, *declared]))
 
     @classmethod
     def lacking(cls, candidate: type) -> list[str]:
@@ -68,31 +90,64 @@ class Seat(ABC):  # noqa: B024 - no abstract methods: the members are checked by
         return NotImplemented
 
 
-class GradientEstimator(Seat):
+if TYPE_CHECKING:
+    from typing import Protocol as SeatBase  # a type checker reads each seat as a protocol
+else:
+    SeatBase = Seat  # at run time: the structural check above
+
+
+class GradientEstimator(SeatBase):
     """Estimates ∇f and ∇m_j at the search policy θ_μ and walks θ_μ (PPGA: VPPO).
-
-    Members the loop calls (see :class:`qdil.qd.vppo.VPPO` for their arguments):
-
-    - ``setup(train_env, executor, policy, generator, seed)``: bind the training
-      simulations, the executor that steps them, the policy family and the run's noise;
-    - ``compute_jacobian(theta, stats, reward_fn, seed) -> PhaseResult``: the (k+1, D)
-      gradient estimates as ``solutions - theta``;
-    - ``walk(theta, stats, coefficients, reward_fn, seed) -> PhaseResult``: θ_μ moved along
-      c_0·∇f + Σ c_j·∇m_j, with its observation statistics;
-    - ``state_dict()`` / ``load_state_dict(state)``: what a checkpoint keeps.
 
     An estimator that plays evaluation episodes itself (ES gradients) says how many at once
     in an ``eval_slots`` attribute; the run's evaluation environment holds that many.
     """
 
     title = "gradient estimator"
-    members = ("setup", "compute_jacobian", "walk", "state_dict", "load_state_dict")
+
+    def setup(
+        self,
+        train_env: LocomotionVectorEnv,
+        executor: Executor,
+        policy: Any,
+        generator: torch.Generator,
+        seed: int,
+    ) -> None:
+        """Bind the training simulations, their executor, the policy family, the noise.
+
+        ``policy`` is the run's ``qdil.config.PolicyConfig`` (the config sits a floor above
+        the seats, which it names).
+        """
+        ...
+
+    def compute_jacobian(
+        self, theta: np.ndarray, stats: RunningMeanStd, reward_fn: RewardFn, seed: int
+    ) -> PhaseResult:
+        """The (k+1, D) gradient estimates at ``theta`` (D,), as ``solutions - theta``."""
+        ...
+
+    def walk(
+        self,
+        theta: np.ndarray,
+        stats: RunningMeanStd,
+        coefficients: np.ndarray,
+        reward_fn: RewardFn,
+        seed: int,
+    ) -> PhaseResult:
+        """θ_μ moved along c_0·∇f + Σ c_j·∇m_j (``coefficients`` (k+1,)), with its stats."""
+        ...
+
+    def state_dict(self) -> dict:
+        """What a checkpoint keeps."""
+        ...
+
+    def load_state_dict(self, state: dict) -> None:
+        """Restore what :meth:`state_dict` gave."""
+        ...
 
 
-class Emitter(Seat):
+class Emitter(SeatBase):
     """pyribs' emitter duties: ``ask`` solutions, ``tell`` their results (gradient-free).
-
-    pyribs' schedulers also read ``archive`` (the one they insert into) and ``solution_dim``.
 
     With ``rl: null`` the loop scores whatever the scheduler's emitters ask for and tells
     them (``ribs.emitters.EvolutionStrategyEmitter``: sep-CMA-MAE); with a gradient
@@ -100,39 +155,93 @@ class Emitter(Seat):
     """
 
     title = "emitter"
-    members = ("archive", "solution_dim", "batch_size", "ask", "tell")
+
+    @property
+    def archive(self) -> ArchiveBase:
+        """The archive the scheduler inserts into (pyribs' schedulers read it)."""
+        ...
+
+    @property
+    def solution_dim(self) -> Int | tuple[Int, ...]:
+        """D, the length of a solution (pyribs allows a shape)."""
+        ...
+
+    @property
+    def batch_size(self) -> Int:
+        """Solutions per ``ask``."""
+        ...
+
+    def ask(self) -> np.ndarray:
+        """(batch_size, D) solutions to score."""
+        ...
+
+    def tell(
+        self,
+        solution: np.ndarray,
+        objective: np.ndarray,
+        measures: np.ndarray,
+        add_info: dict[str, np.ndarray],
+        **fields: np.ndarray,
+    ) -> None:
+        """Their objectives (B,), measures (B, m) and what the archive said of them."""
+        ...
 
 
-class SearchEmitter(Seat):
+class SearchEmitter(Emitter, SeatBase):
     """A DQD emitter with one search policy θ_μ that the estimator walks (PPGA's).
 
-    pyribs' emitter duties (``ask_dqd``, ``tell_dqd``, ``ask``, ``tell``, ``batch_size``,
-    ``archive``) plus what the loop needs to score θ_μ and its branches in one batch and to
-    walk θ_μ: ``propose(jacobian)`` (the branches the next ``ask`` returns), ``theta`` and
-    ``theta_fields`` (θ_μ and its observation statistics, read), ``move(solution, fields)``
-    (θ_μ moves to where the walk ended: the one way the loop changes it),
-    ``coefficient_mean`` (the walk's weights, (k+1,)) and ``restarts`` (a counter).
+    pyribs' emitter duties plus what the loop needs to score θ_μ and its branches in one
+    batch and to walk θ_μ; :meth:`move` is the one way the loop changes θ_μ.
     """
 
     title = "search emitter"
-    members = (
-        "archive",
-        "solution_dim",
-        "batch_size",
-        "ask_dqd",
-        "tell_dqd",
-        "ask",
-        "tell",
-        "propose",
-        "theta",
-        "theta_fields",
-        "move",
-        "coefficient_mean",
-        "restarts",
-    )
+
+    def ask_dqd(self) -> np.ndarray:
+        """(1, D) θ_μ, whose gradients the estimator computes."""
+        ...
+
+    def tell_dqd(
+        self,
+        solution: np.ndarray,
+        objective: np.ndarray,
+        measures: np.ndarray,
+        jacobian: np.ndarray,
+        add_info: dict[str, np.ndarray],
+        **fields: np.ndarray,
+    ) -> None:
+        """θ_μ's objective, measures and (1, k+1, D) Jacobian."""
+        ...
+
+    def propose(self, jacobian: np.ndarray) -> np.ndarray:
+        """(λ, D) the branches along ``jacobian`` that the next ``ask`` returns."""
+        ...
+
+    @property
+    def theta(self) -> np.ndarray:
+        """(D,) θ_μ."""
+        ...
+
+    @property
+    def theta_fields(self) -> dict[str, np.ndarray]:
+        """θ_μ's observation statistics, the archive's extra fields."""
+        ...
+
+    def move(self, solution: np.ndarray, fields: dict[str, np.ndarray]) -> None:
+        """θ_μ moves to where the estimator's walk ended, with its statistics."""
+        ...
+
+    @property
+    def coefficient_mean(self) -> np.ndarray:
+        """(k+1,) the walk's weights of ∇f and ∇m_j."""
+        ...
+
+    @property
+    def restarts(self) -> int:
+        """How many times θ_μ restarted at an elite."""
+        ...
 
 
-class Scheduler(Seat):
+class Scheduler(SeatBase):
     """Asks its emitters for solutions and tells them the results, inserting into ``archive``.
 
     pyribs' ``Scheduler`` and ``BanditScheduler`` (which keeps a pool of emitters and asks
@@ -140,19 +249,47 @@ class Scheduler(Seat):
     """
 
     title = "scheduler"
-    members = ("archive", "ask", "tell")
+
+    @property
+    def archive(self) -> ArchiveBase:
+        """The search archive."""
+        ...
+
+    def ask(self) -> np.ndarray:
+        """(B, D) solutions from its emitters."""
+        ...
+
+    def tell(self, objective: np.ndarray, measures: np.ndarray, **fields: np.ndarray) -> None:
+        """Their objectives (B,) and measures (B, m), inserted and routed to the emitters."""
+        ...
 
 
-class SearchScheduler(Seat):
+class SearchScheduler(Scheduler, SeatBase):
     """A scheduler of one search emitter that routes the DQD calls too (pyribs' ``Scheduler``).
 
-    The loop with a gradient estimator calls ``ask_dqd()``, ``tell_dqd(objective, measures,
-    jacobian, **fields)``, ``ask()`` and ``tell(objective, measures, **fields)``, and finds
-    the search emitter in ``emitters``.
+    The loop finds the search emitter in ``emitters``.
     """
 
     title = "search scheduler"
-    members = ("archive", "emitters", "ask_dqd", "tell_dqd", "ask", "tell")
+
+    @property
+    def emitters(self) -> Sequence[Any]:
+        """Its emitters (one search emitter beside an estimator)."""
+        ...
+
+    def ask_dqd(self) -> np.ndarray:
+        """(1, D) the search emitter's θ_μ."""
+        ...
+
+    def tell_dqd(
+        self,
+        objective: np.ndarray,
+        measures: np.ndarray,
+        jacobian: np.ndarray,
+        **fields: np.ndarray,
+    ) -> None:
+        """θ_μ's objective (1,), measures (1, m) and Jacobian (1, k+1, D)."""
+        ...
 
 
 SearchArchive = ArchiveBase
