@@ -9,7 +9,8 @@ marked as sections (:func:`timed`, :func:`section`); they cost a flag check unti
     print(seconds)  # {"physics": 1.9, "policy inference": 0.4, ...}
 
 A section inside another of the same name counts once. ``benchmarks/bench_iteration.py``
-reads its breakdown this way.
+reads its breakdown this way. :class:`Stopwatch` times the loop's own phases, the
+``perf/*_seconds`` metrics of every iteration.
 """
 
 from __future__ import annotations
@@ -88,3 +89,29 @@ def recording(clock: Callable[[], float] = time.perf_counter) -> Iterator[dict[s
     finally:
         _totals, _clock = None, time.perf_counter
         _open.clear()
+
+
+class Stopwatch:
+    """The seconds of an iteration's phases: ``with watch("walk"): ...``.
+
+    Attributes:
+        start: ``time.perf_counter()`` when the watch was made (the iteration's start).
+        seconds: phase -> seconds, in the order the phases ran.
+    """
+
+    def __init__(self) -> None:
+        self.start = time.perf_counter()
+        self.seconds: dict[str, float] = {}
+
+    @contextmanager
+    def __call__(self, phase: str) -> Iterator[None]:
+        """Time the block as ``phase``."""
+        tic = time.perf_counter()
+        try:
+            yield
+        finally:
+            self.seconds[phase] = time.perf_counter() - tic
+
+    def metrics(self) -> dict[str, float]:
+        """``perf/<phase>_seconds`` for every phase timed."""
+        return {f"perf/{phase}_seconds": value for phase, value in self.seconds.items()}

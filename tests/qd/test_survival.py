@@ -82,13 +82,13 @@ def test_every_run_logs_the_survival_figures(smoke_run: Path) -> None:
 
 
 def test_the_walk_figures_weigh_the_reward_and_the_contacts_by_the_coefficients() -> None:
-    from qdil.qd.loop import _walk_survival
+    from qdil.qd.iteration_reward import walk_survival
 
     rollout = _rollout()
     rollout.next_contacts[..., 0] = 1.0  # the first foot down throughout
     learned = torch.arange(18, dtype=torch.float32).reshape(6, 3)
-    figures = _walk_survival([rollout, rollout], [learned, learned], np.array([2.0, -1.0, 5.0]))
+    figures = walk_survival([rollout, rollout], [learned, learned], np.array([2.0, -1.0, 5.0]))
     tally = SurvivalTally(prefix="walk_")
     tally.add(rollout, 2.0 * learned - 1.0)
     assert figures == tally.metrics()
-    assert _walk_survival([], [], np.ones(3)) == {}
+    assert walk_survival([], [], np.ones(3)) == {}

@@ -28,26 +28,24 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import replace
 from functools import partial
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
 
 from qdil.config import finished
 from qdil.data import Rollout, TransitionBatch
-from qdil.qd.absorbing import AbsorbingTail
 from qdil.qd.archives import QD_OFFSETS, qd_metrics
 from qdil.qd.checkpoint import save_checkpoint
+from qdil.qd.iteration_reward import TrainReward, reward_functions, update_reward, walk_survival
 from qdil.qd.search import search_emitters
-from qdil.qd.survival import SurvivalTally
-from qdil.qd.vppo import walk_rewards
-from qdil.reductions import sum_over
 from qdil.rl.episodes import Evaluation
 from qdil.rl.normalize import RunningMeanStd, fields_from_stats, stats_from_fields
-from qdil.timing import ARCHIVE_WORK, REWARD_MODEL, section
+from qdil.timing import ARCHIVE_WORK, Stopwatch, section
 
 if TYPE_CHECKING:
     from qdil.qd.state import Run
+    from qdil.seats import PhaseResult
 
 
 @contextmanager
@@ -66,70 +64,6 @@ def quiet_empty_archive() -> Iterator[None]:
         yield
 
 
-class TrainReward:
-    """The per-step rewards the estimator trains on, a finiteness check, their mean per step.
-
-    Args:
-        run: the run whose reward model scores the rollouts.
-        tail: what an absorbing state adds where episodes terminate (``None``: nothing);
-            the tally, the mean and ``returned`` leave it out.
-    """
-
-    def __init__(self, run: Run, tail: AbsorbingTail | None = None) -> None:
-        self.run = run
-        self.tail = tail
-        self.total = 0.0
-        self.steps = 0
-        self.survival = SurvivalTally()
-        self.returned: list[torch.Tensor] = []  # this phase's rewards, in call order
-
-    def __call__(self, rollout: Rollout) -> torch.Tensor:
-        """(T, N) rewards of a training rollout (visits count toward the bonus)."""
-        with section(REWARD_MODEL):
-            rewards = self.run.reward.predict_reward(rollout, update=True)
-        self.run.reward.check_finite(rewards, "rewards", self.run.state.iteration)
-        valid = rollout.valid > 0
-        self.total += float(sum_over(rewards[valid], 0))  # thread-invariant over 384,000 steps
-        self.steps += int(valid.sum())
-        self.survival.add(rollout, rewards)
-        self.returned.append(rewards)
-        return rewards if self.tail is None else rewards + self.tail(rollout)
-
-    @property
-    def per_step(self) -> float:
-        """Mean reward per valid training step so far (NaN before any rollout)."""
-        return self.total / self.steps if self.steps else float("nan")
-
-
-def reward_functions(run: Run) -> tuple[TrainReward, Any]:
-    """The rewards the estimator trains on and the evaluation's objective, checked finite."""
-    reward = run.reward
-
-    def checked(rewards: torch.Tensor) -> torch.Tensor:
-        reward.check_finite(rewards, "rewards", run.state.iteration)
-        return rewards
-
-    train_tail = eval_tail = None
-    if reward.absorbing:
-        horizon, iteration = run.eval_env.max_episode_steps, run.state.iteration
-        if horizon is None:
-            raise ValueError("absorbing states need env.max_episode_steps (the time limit)")
-        eval_tail = AbsorbingTail(reward, horizon, None, iteration)
-        # an estimator that discounts per-step rewards (VPPO's GAE) declares its gamma;
-        # one that scores whole episodes (ES gradients) gets the episodes' tail
-        gamma = getattr(run.estimator, "gamma", None)
-        train_tail = AbsorbingTail(reward, horizon, gamma, iteration)
-    train_reward = TrainReward(run, train_tail)
-
-    def eval_reward(rollout: Rollout) -> torch.Tensor:
-        with section(REWARD_MODEL):
-            rewards = checked(reward.predict_reward(rollout))
-        return rewards if eval_tail is None else rewards + eval_tail(rollout)
-
-    uses_true = run.qd.fitness == "true" or reward.is_true_reward
-    return train_reward, (None if uses_true else eval_reward)
-
-
 def _objective(run: Run, evaluation: Evaluation) -> np.ndarray:
     return evaluation.true_objective if run.qd.fitness == "true" else evaluation.objective
 
@@ -144,31 +78,29 @@ def qd_iteration(run: Run) -> dict[str, float]:
     state, estimator, scheduler, emitter = run.state, run.estimator, run.scheduler, run.emitter
     train_reward, eval_reward = reward_functions(run)
     qd = run.qd
-    timings: dict[str, float] = {}
-    tic = time.perf_counter()
+    watch = Stopwatch()
 
     # ---- 1. gradients at θ_μ; the branches along them
-    with section(ARCHIVE_WORK):
-        theta = scheduler.ask_dqd()[0]
-    stats = stats_from_fields(emitter.theta_fields)
-    jacobian_phase = estimator.compute_jacobian(theta, stats, train_reward, state.next_seed())
-    jacobian = (jacobian_phase.solutions.astype(np.float64) - theta)[None]
-    timings["jacobian"] = time.perf_counter() - tic
+    with watch("jacobian"):
+        with section(ARCHIVE_WORK):
+            theta = scheduler.ask_dqd()[0]
+        stats = stats_from_fields(emitter.theta_fields)
+        jacobian_phase = estimator.compute_jacobian(theta, stats, train_reward, state.next_seed())
+        jacobian = (jacobian_phase.solutions.astype(np.float64) - theta)[None]
     branches = emitter.propose(jacobian)  # what scheduler.ask() returns below
     branch_stats = RunningMeanStd.stack([stats] * len(branches))
 
     # ---- 2. score θ_μ and the branches (one batch where the executor can), insert θ_μ,
     # then the branches; rank the coefficients by archive improvement and adapt xNES
-    tic_eval = time.perf_counter()
-    mean_eval, evaluation = run.scorer.evaluate_all(
-        [
-            (theta[None], stats, qd.mean_episodes, state.next_seed()),
-            (branches, branch_stats, qd.branch_episodes, state.next_seed()),
-        ],
-        eval_reward,
-        qd.deterministic_eval,
-    )
-    timings["evaluate"] = time.perf_counter() - tic_eval
+    with watch("evaluate"):
+        mean_eval, evaluation = run.scorer.evaluate_all(
+            [
+                (theta[None], stats, qd.mean_episodes, state.next_seed()),
+                (branches, branch_stats, qd.branch_episodes, state.next_seed()),
+            ],
+            eval_reward,
+            qd.deterministic_eval,
+        )
     fields = fields_from_stats(stats, mean_eval.lengths)
     objective = _objective(run, mean_eval)  # the run's own: learned, or true with fitness true
     with quiet_empty_archive(), section(ARCHIVE_WORK):
@@ -186,37 +118,52 @@ def qd_iteration(run: Run) -> dict[str, float]:
     run.archives.add(branches, objective, evaluation.true_objective, evaluation.measures, fields)
 
     # ---- 3. walk θ_μ along the coefficient mean
-    tic_walk = time.perf_counter()
-    coefficients = np.array(emitter.coefficient_mean)  # what the walk is handed
-    train_reward.returned.clear()
-    walk = estimator.walk(
-        emitter.theta,
-        stats_from_fields(emitter.theta_fields),
-        coefficients,
-        train_reward,
-        state.next_seed(),
-    )
-    walked = fields_from_stats(walk.stats, [0.0])
-    emitter.move(walk.solutions[0], {k: v[0] for k, v in walked.items() if k != "length"})
-    timings["walk"] = time.perf_counter() - tic_walk
+    with watch("walk"):
+        coefficients = np.array(emitter.coefficient_mean)  # what the walk is handed
+        train_reward.returned.clear()
+        walk = estimator.walk(
+            emitter.theta,
+            stats_from_fields(emitter.theta_fields),
+            coefficients,
+            train_reward,
+            state.next_seed(),
+        )
+        walked = fields_from_stats(walk.stats, [0.0])
+        emitter.move(walk.solutions[0], {k: v[0] for k, v in walked.items() if k != "length"})
 
     # ---- 4. reward model update (once per iteration, on this iteration's policy data);
     # fixed rewards return {}, the bonus wrapper still reports its counts
-    tic_reward = time.perf_counter()
-    policy = TransitionBatch.cat([r.transitions() for r in walk.rollouts])
-    expert = run.expert
-    if run.reward.needs_log_probs:  # AIRL: both batches under the walked θ_μ
-        logp = partial(run.scorer.log_probs, walk.solutions[0], walk.stats)
-        expert = replace(expert, log_probs=logp(expert.obs, expert.actions))
-        policy = replace(policy, log_probs=logp(policy.obs, policy.actions))
-    reward_metrics = _update_reward(run, expert, policy)
-    timings["reward_update"] = time.perf_counter() - tic_reward
+    with watch("reward_update"):
+        policy = TransitionBatch.cat([r.transitions() for r in walk.rollouts])
+        expert = run.expert
+        if run.reward.needs_log_probs:  # AIRL: both batches under the walked θ_μ
+            logp = partial(run.scorer.log_probs, walk.solutions[0], walk.stats)
+            expert = replace(expert, log_probs=logp(expert.obs, expert.actions))
+            policy = replace(policy, log_probs=logp(policy.obs, policy.actions))
+        reward_metrics = update_reward(run, expert, policy)
 
     # ---- 5. metrics
     steps = jacobian_phase.env_steps + walk.env_steps + mean_eval.env_steps + evaluation.env_steps
-    metrics = _common_metrics(run, steps, tic, reward_metrics, train_reward)
-    metrics |= _walk_survival(walk.rollouts, train_reward.returned, coefficients)
-    metrics |= {f"rl/jacobian_{k}": v for k, v in jacobian_phase.diagnostics.items()}
+    metrics = _common_metrics(run, steps, watch.start, reward_metrics, train_reward)
+    metrics |= walk_survival(walk.rollouts, train_reward.returned, coefficients)
+    metrics |= _search_metrics(run, jacobian_phase, walk, mean_eval, restarts)
+    return metrics | watch.metrics()
+
+
+def _search_metrics(
+    run: Run, jacobian: PhaseResult, walk: PhaseResult, mean_eval: Evaluation, restarts: int
+) -> dict[str, float]:
+    """The estimator's diagnostics, θ_μ's scores and measures, the emitter's state.
+
+    Args:
+        run: the run, after the iteration's walk.
+        jacobian: the Jacobian phase.
+        walk: the walk.
+        mean_eval: θ_μ's evaluation.
+        restarts: the emitter's restarts before this iteration's ``tell``.
+    """
+    emitter = run.emitter
+    metrics = {f"rl/jacobian_{k}": v for k, v in jacobian.diagnostics.items()}
     metrics |= {f"rl/walk_{k}": v for k, v in walk.diagnostics.items()}
     metrics |= {
         "search/objective": float(_objective(run, mean_eval)[0]),
@@ -229,7 +176,6 @@ def qd_iteration(run: Run) -> dict[str, float]:
         metrics[f"search/measure_{j}"] = float(value)
     for j, value in enumerate(emitter.coefficient_mean):
         metrics[f"emitter/coefficient_{j}"] = float(value)
-    metrics |= {f"perf/{k}_seconds": v for k, v in timings.items()}
     return metrics
 
 
@@ -272,7 +218,7 @@ def gradient_free_iteration(run: Run) -> dict[str, float]:
         for rollout in rollouts:
             train_reward(rollout)
         policy = TransitionBatch.cat([r.transitions() for r in rollouts])
-        reward_metrics = _update_reward(run, run.expert, policy)
+        reward_metrics = update_reward(run, run.expert, policy)
     metrics = _common_metrics(run, evaluation.env_steps, tic, reward_metrics, train_reward)
     emitters = search_emitters(scheduler)
     metrics |= {
@@ -281,34 +227,6 @@ def gradient_free_iteration(run: Run) -> dict[str, float]:
         "emitter/restarts": float(sum(getattr(e, "restarts", 0) for e in emitters)),
     }
     return metrics
-
-
-def _walk_survival(
-    rollouts: list[Rollout], rewards: list[torch.Tensor], coefficients: np.ndarray
-) -> dict[str, float]:
-    """The survival figures of what the walk optimises, c_0·r̂ + Σ_j c_j·δ_j.
-
-    VPPO's walk calls the reward once per rollout; an estimator whose walk plays no
-    rollouts (ES gradients) gets none.
-    """
-    if not rollouts or len(rollouts) != len(rewards):
-        return {}
-    tally = SurvivalTally(prefix="walk_")
-    for rollout, learned in zip(rollouts, rewards, strict=True):
-        c = torch.as_tensor(coefficients, dtype=learned.dtype, device=learned.device)
-        tally.add(rollout, walk_rewards(c, learned, rollout.next_contacts))
-    return tally.metrics()
-
-
-def _update_reward(run: Run, expert: Any, policy: TransitionBatch) -> dict[str, float]:
-    """The reward model's once-per-iteration update (decision D3), its metrics checked finite."""
-    with section(REWARD_MODEL):
-        reward_metrics = run.reward.update(expert, policy, run.state.iteration)
-        if run.reward.absorbing:
-            run.reward.price_absorbing(policy)
-    for key, value in reward_metrics.items():
-        run.reward.check_finite(torch.as_tensor(value), f"update metric {key}", run.state.iteration)
-    return reward_metrics
 
 
 def _common_metrics(
