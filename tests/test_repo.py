@@ -149,3 +149,14 @@ def test_link_duplicates_keeps_the_first_added_copy_and_links_the_rest(tmp_path:
     assert str(linked.readlink()) == "../../a/run/metrics.csv.gz"  # relative: clones read it
     assert not (tmp_path / "b" / "run" / "other.csv.gz").is_symlink()
     assert module.main([str(tmp_path), "--check"]) == 0
+    # an image is not linked: its report's pages show the kept copy, and it goes
+    for report in ("a", "b"):
+        (tmp_path / report / "curves").mkdir()
+        (tmp_path / report / "curves" / "qd.png").write_bytes(data[::-1] * 2)
+        (tmp_path / report / "report.md").write_text("![QD-Score](curves/qd.png)\n")
+        (tmp_path / report / "report.html").write_text('<img src="curves/qd.png">\n')
+    assert module.main([str(tmp_path)]) == 0
+    assert not os.path.lexists(tmp_path / "b" / "curves" / "qd.png")
+    assert (tmp_path / "b" / "report.md").read_text() == "![QD-Score](../a/curves/qd.png)\n"
+    assert (tmp_path / "b" / "report.html").read_text() == '<img src="../a/curves/qd.png">\n'
+    assert (tmp_path / "a" / "report.md").read_text() == "![QD-Score](curves/qd.png)\n"

@@ -9,6 +9,9 @@ call of a GPU machine with room for wheels (docs/guides/gpu.md#on-a-borrowed-gpu
 
 The copy that stays is the one git added first (untracked files lose to tracked ones; ties
 go to the shorter, then the alphabetically first path). Readers open a link as the file.
+An image is not linked: the pages of its report (``*.md``, ``*.html`` in the folder below
+``root`` that holds it) are rewritten to show the kept copy, and the image goes, since a
+web viewer may not follow a link to an image.
 """
 
 from __future__ import annotations
@@ -16,12 +19,14 @@ from __future__ import annotations
 import argparse
 import hashlib
 import os
+import re
 import subprocess
 import sys
 from collections import defaultdict
 from pathlib import Path
 
 SMALLEST = 1024  # bytes: smaller copies cost less than the link's clarity
+IMAGES = {".png", ".svg", ".gif", ".jpg", ".jpeg"}
 
 
 def duplicates(root: Path) -> list[list[Path]]:
@@ -49,8 +54,8 @@ def added_at(paths: list[Path]) -> dict[Path, float]:
     return times
 
 
-def link(group: list[Path]) -> tuple[Path, int]:
-    """Replace all but the first-added file of ``group`` by links to it.
+def link(group: list[Path], root: Path) -> tuple[Path, int]:
+    """Replace all but the first-added file of ``group`` by links to it (images: see above).
 
     Returns:
         the file kept and the bytes the links saved.
@@ -62,11 +67,45 @@ def link(group: list[Path]) -> tuple[Path, int]:
         if path == keep:
             continue
         saved += path.stat().st_size
+        if path.suffix.lower() in IMAGES:
+            show_instead(path, keep, pages_of(path, root))
+            path.unlink()
+            continue
         tmp = path.with_name(path.name + ".link-tmp")
         tmp.unlink(missing_ok=True)
         tmp.symlink_to(os.path.relpath(keep, path.parent))
         tmp.replace(path)  # atomic: the path is never missing
     return keep, saved
+
+
+def pages_of(path: Path, root: Path) -> list[Path]:
+    """The pages of the report that holds ``path``: its folder just below ``root``."""
+    report = path.parent
+    while report.parent != root and report.parent != report:
+        report = report.parent
+    return sorted(p for p in report.rglob("*") if p.suffix in (".md", ".html") and p.is_file())
+
+
+def show_instead(path: Path, keep: Path, pages: list[Path]) -> None:
+    """Rewrite each page's reference to ``path`` (in ``src="..."`` or ``](...)``) as ``keep``."""
+    for page in pages:
+        old = os.path.relpath(path, page.parent)
+        new = os.path.relpath(keep, page.parent)
+        text = page.read_text()
+        changed = re.sub(rf'(?<=["(]){re.escape(old)}(?=[")])', new, text)
+        if changed != text:
+            page.write_text(changed)
+
+
+def image_links(root: Path) -> int:
+    """Replace image links under ``root`` (from before images were not linked); count them."""
+    count = 0
+    for path in sorted(root.rglob("*")):
+        if path.is_symlink() and path.suffix.lower() in IMAGES:
+            show_instead(path, path.resolve(), pages_of(path, root))
+            path.unlink()
+            count += 1
+    return count
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -79,6 +118,8 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if not args.root.is_dir():
         parser.error(f"{args.root} is not a folder")
+    if not args.check and (count := image_links(args.root)):
+        print(f"{count} linked images now shown from the kept copy")
     groups = duplicates(args.root)
     extra = sum(path.stat().st_size for group in groups for path in group[1:])
     if args.check:
@@ -86,7 +127,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"same bytes: {', '.join(str(p) for p in group)}")
         print(f"{len(groups)} files held more than once under {args.root} ({extra:,} bytes)")
         return 1 if groups else 0
-    saved = sum(link(group)[1] for group in groups)
+    saved = sum(link(group, args.root)[1] for group in groups)
     print(f"{len(groups)} files held more than once: {saved:,} bytes now links")
     return 0
 
