@@ -144,7 +144,9 @@ def qd_iteration(run: Run) -> dict[str, float]:
 
     # ---- 5. metrics
     steps = jacobian_phase.env_steps + walk.env_steps + mean_eval.env_steps + evaluation.env_steps
-    metrics = _common_metrics(run, steps, watch.start, reward_metrics, train_reward)
+    seconds = time.perf_counter() - watch.start
+    state.count(steps, seconds)
+    metrics = _common_metrics(run, steps, seconds, reward_metrics, train_reward)
     metrics |= walk_survival(walk.rollouts, train_reward.returned, coefficients)
     metrics |= _search_metrics(run, jacobian_phase, walk, mean_eval, restarts)
     return metrics | watch.metrics()
@@ -219,7 +221,9 @@ def gradient_free_iteration(run: Run) -> dict[str, float]:
             train_reward(rollout)
         policy = TransitionBatch.cat([r.transitions() for r in rollouts])
         reward_metrics = update_reward(run, run.expert, policy)
-    metrics = _common_metrics(run, evaluation.env_steps, tic, reward_metrics, train_reward)
+    seconds = time.perf_counter() - tic
+    state.count(evaluation.env_steps, seconds)
+    metrics = _common_metrics(run, evaluation.env_steps, seconds, reward_metrics, train_reward)
     emitters = search_emitters(scheduler)
     metrics |= {
         "search/objective": float(np.max(objective)),
@@ -232,15 +236,15 @@ def gradient_free_iteration(run: Run) -> dict[str, float]:
 def _common_metrics(
     run: Run,
     steps: int,
-    tic: float,
+    seconds: float,
     reward_metrics: dict[str, float],
     train_reward: TrainReward,
 ) -> dict[str, float]:
-    """The archives', reward's and throughput's metrics of an iteration begun at ``tic``."""
+    """The archives', reward's and throughput's metrics of an iteration of ``seconds``.
+
+    Reads the run's totals after the iteration counted itself (``LoopState.count``).
+    """
     state = run.state
-    seconds = time.perf_counter() - tic
-    state.env_steps += steps
-    state.seconds += seconds
     offset = QD_OFFSETS.get(run.task, 0.0)
     metrics = {f"qd/{k}": v for k, v in qd_metrics(run.archives.true, offset).items()}
     if not run.reward.is_true_reward:

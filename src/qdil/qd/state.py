@@ -68,6 +68,11 @@ class LoopState:
         """A fresh seed for the next environment reset."""
         return int(self.rng.integers(2**31 - 1))
 
+    def count(self, env_steps: int, seconds: float) -> None:
+        """Add an iteration's simulated env steps and wall seconds to the run's totals."""
+        self.env_steps += env_steps
+        self.seconds += seconds
+
 
 @dataclass
 class Run:
