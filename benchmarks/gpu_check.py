@@ -7,19 +7,19 @@ One command on a machine with a CUDA GPU and the warp extra::
 runs its steps in the order of their value, in steady state (kernels compiled and Warp
 graphs recorded before any clock runs), until its budget (480 s) is spent:
 
-1. ``tests``: the GPU tests (``pytest -m gpu -n 0 tests/test_gpu.py
-   tests/envs/test_warp_backend.py``), so that a check cut short still says what is correct;
-2. ``iterations``, ``iterations_halfcheetah``, ``iterations_humanoid``: two QD iterations of
-   each task's paper-scale recipe (``recipes/gpu/*_mcwae.yaml``) through ``qdil fit``, each
-   phase's seconds from ``metrics.csv`` (the second iteration is the figure: the first
-   records graphs and builds the reward model's optimiser state);
-3. ``integrators``: one env step of each task with each integrator (``env.integrator``) at
+1. ``iterations_halfcheetah``, ``iterations_humanoid``: two QD iterations of each task's
+   paper-scale recipe (``recipes/gpu/*_mcwae.yaml``) through ``qdil fit``, each phase's
+   seconds from ``metrics.csv`` (the second iteration is the figure: the first records
+   graphs and builds the reward model's optimiser state); no GPU has measured them yet;
+2. ``integrators``: one env step of each task with each integrator (``env.integrator``) at
    the paper's N = 3,000, the per-step probe of ``benchmarks/bench_integrators.py``;
-4. ``iterations_cheapest``: Walker2d's iterations with the integrator that step found
-   cheapest (Euler if it did not run);
-5. ``iterations_deterministic``: the same on MuJoCo Warp's deterministic kernels
+3. ``iterations_cheapest``: Walker2d's iterations with the integrator that step found
+   cheapest (Euler if it did not run), then ``iterations``: Walker2d's with its own (RK4);
+4. ``iterations_deterministic``: the same on MuJoCo Warp's deterministic kernels
    (``env.deterministic``): what repeatability costs;
-6. ``packed``: two seeds as one ``qdil sweep`` at half a GPU per trial, against one alone;
+5. ``packed``: two seeds as one ``qdil sweep`` at half a GPU per trial, against one alone;
+6. ``tests``: the GPU tests (``pytest -m gpu -n 0 tests/test_gpu.py
+   tests/envs/test_warp_backend.py``);
 7. ``repeatability``: how far a training rollout and an evaluation land from themselves when
    played again (eagerly, from a CUDA graph, narrowed or not);
 8. the probes of ``benchmarks/gpu/probes.py``, measured on an H200 on 2026-11-27: ``breakdown``
@@ -32,8 +32,10 @@ graphs recorded before any clock runs), until its budget (480 s) is spent:
 
 It writes ``gpu_check.json`` after every step and ``gpu_check.md`` (the tables of
 docs/guides/gpu.md). Run again with the same ``--out``, it keeps every step that folder's
-``gpu_check.json`` measured without error on the same card and runs the rest (``--fresh``
-runs all again): a GPU lent for minutes at a time finishes the check over several calls.
+``gpu_check.json`` measured without error on the same card with the same code (a hash of
+``src/qdil``, ``benchmarks`` and the GPU recipes: the machine's copy has no git) and runs
+the rest (``--fresh`` runs all again): a GPU lent for minutes at a time finishes the check
+over several calls.
 ``--device cpu --quick`` runs the same code scaled down on Warp's CPU device (the test suite
 runs it); its figures are not a GPU's.
 """
@@ -90,8 +92,9 @@ def cheapest(result: dict[str, Any], task: str = "Walker2d-v5") -> str:
     return min(timed, key=timed.__getitem__) if timed else "euler"
 
 
-def earlier(out: Path, card: str, fresh: bool) -> dict[str, Any]:
-    """The steps a previous check in ``out`` measured without error on the same card."""
+def earlier(out: Path, machine: dict[str, Any], fresh: bool) -> dict[str, Any]:
+    """The steps a previous check in ``out`` measured without error on the same card with
+    the same code (``machine``'s ``card`` and ``code``); nothing where either differs."""
     path = out / "gpu_check.json"
     if fresh or not path.is_file():
         return {}
@@ -99,7 +102,8 @@ def earlier(out: Path, card: str, fresh: bool) -> dict[str, Any]:
         before = json.loads(path.read_text())
     except ValueError:  # a file cut mid-write by a killed check: start over
         return {}
-    if (before.get("machine") or {}).get("card") != card:
+    held = before.get("machine") or {}
+    if (held.get("card"), held.get("code")) != (machine["card"], machine["code"]):
         return {}
     dropped = {*before.get("errors", {}), "errors", "tracebacks", "not_run", "kept"}
     return {key: value for key, value in before.items() if key not in dropped}
@@ -136,16 +140,14 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     n = 6 if args.quick else 3000
     command = "python -m benchmarks.gpu_check " + " ".join(argv or sys.argv[1:])
     info = machine(args.device)
-    result: dict[str, Any] = earlier(args.out, info["card"], args.fresh)
+    result: dict[str, Any] = earlier(args.out, info, args.fresh)
     result |= {"command": command.strip(), "device": args.device, "machine": info, "errors": {}}
 
     def iterations(task: str, extra: tuple[str, ...] = ()) -> list[dict[str, float]]:
         return qd_iterations(args.device, [*overrides, *extra], 2, recipe=RECIPES[task])
 
     steps: dict[str, Callable[[], Any]] = {
-        # first: what is correct matters more than what is fast when the budget runs out
-        "tests": lambda: gpu_tests(min(240.0, args.budget - (time.perf_counter() - start))),
-        "iterations": lambda: iterations("Walker2d-v5"),
+        # first: the figures no GPU has measured yet (Walker2d's iteration has one)
         "iterations_halfcheetah": lambda: iterations("HalfCheetah-v5"),
         "iterations_humanoid": lambda: iterations("Humanoid-v5"),
         "integrators": lambda: step_costs(
@@ -160,10 +162,12 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
             "integrator": cheapest(result),
             "rows": iterations("Walker2d-v5", ("--env.integrator", cheapest(result))),
         },
+        "iterations": lambda: iterations("Walker2d-v5"),  # the cheapest one's baseline
         "iterations_deterministic": lambda: iterations(
             "Walker2d-v5", ("--env.deterministic", "true")
         ),
         "packed": lambda: packed_trials(args.device, overrides, 2),
+        "tests": lambda: gpu_tests(min(240.0, args.budget - (time.perf_counter() - start))),
         "repeatability": lambda: repeatability(args.device, args.quick),
         "breakdown": lambda: step_breakdown(args.device, n, 3 if args.quick else 50),
         "floor": lambda: frame_skip_floor(

@@ -65,3 +65,36 @@ def test_parts_carried_one_call_at_a_time_unpack_into_the_same_site(tmp_path: Pa
         capture_output=True,
     )  # fmt: skip
     assert again.returncode == 0 and "staged already" in again.stdout
+
+
+@pytest.mark.skipif(shutil.which("xz") is None or shutil.which("git") is None, reason="xz, git")
+def test_the_check_call_receives_resumes_the_carried_record_then_runs_the_check(
+    tmp_path: Path,
+) -> None:
+    site = tmp_path / "site"
+    site.mkdir()
+    (site / "marker.txt").write_text("staged\n")
+    out = tmp_path / "stage"
+    out.mkdir()
+    _tool().pack(site, out, room=10**6, plan={"packages": {}})
+    call = tmp_path / "call"  # the tree of the call: the repository, one part, a record
+    shutil.copytree(ROOT / "tools", call / "tools")
+    shutil.copytree(ROOT / "benchmarks", call / "benchmarks")
+    shutil.copytree(out / "call-01", call / ".stage" / "call-01")
+    (call / ".stage" / "gpu_check").mkdir()
+    (call / ".stage" / "gpu_check" / "gpu_check.json").write_text('{"machine": {}}')
+    machine = {
+        "QDIL_STAGE_STORE": str(tmp_path / "machine" / "store"),
+        "QDIL_STAGE_SITE": str(tmp_path / "machine" / "site"),
+        "OUT": str(tmp_path / "OUT"),
+        "PATH": os.environ["PATH"],
+    }
+    done = subprocess.run(
+        ["bash", "tools/device_check.sh", "60"], cwd=call, env=machine, capture_output=True,
+        text=True,
+    )  # fmt: skip
+    assert (tmp_path / "machine" / "site" / "marker.txt").read_text() == "staged\n"
+    kept = tmp_path / "OUT" / "gpu_check" / "gpu_check.json"
+    assert kept.read_text() == '{"machine": {}}'  # carried, for the check to resume
+    # then the check itself ran (here, without CUDA, it stops at once, saying so)
+    assert done.returncode == 2 and "--device cuda: torch finds no CUDA device" in done.stderr

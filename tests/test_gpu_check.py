@@ -109,8 +109,22 @@ def test_steps_left_when_the_budget_is_spent_are_listed(tmp_path: Path) -> None:
     result = check.main(["--device", "cpu", "--quick", "--out", str(tmp_path), "--budget", "0"])
     assert result["errors"] == {} and result["seconds"] == {}  # nothing began
     assert result["machine"]["card"] == "Warp CPU device"  # the card is always named
-    assert result["not_run"][:3] == ["tests", "iterations", "iterations_halfcheetah"]
+    # in the order of their value: what no GPU has measured first
+    assert result["not_run"][:3] == ["iterations_halfcheetah", "iterations_humanoid", "integrators"]
     assert "iterations_graphed" in result["not_run"]
     assert (
-        "- not run, the budget spent: tests, iterations," in (tmp_path / "gpu_check.md").read_text()
+        "- not run, the budget spent: iterations_halfcheetah, iterations_humanoid,"
+        in (tmp_path / "gpu_check.md").read_text()
     )
+
+
+def test_a_record_of_other_code_or_another_card_is_not_kept(tmp_path: Path) -> None:
+    check = _gpu_check()
+    here = {"card": "NVIDIA H200", "code": "abc"}
+    record = {"machine": here, "iterations": [{"iteration": 1}], "errors": {"floor": "x"}}
+    (tmp_path / "gpu_check.json").write_text(json.dumps(record))
+    assert check.earlier(tmp_path, here, fresh=False)["iterations"] == [{"iteration": 1}]
+    assert "floor" not in check.earlier(tmp_path, here, fresh=False)  # failed: run again
+    assert check.earlier(tmp_path, here | {"code": "def"}, fresh=False) == {}
+    assert check.earlier(tmp_path, here | {"card": "NVIDIA H100"}, fresh=False) == {}
+    assert check.earlier(tmp_path, here, fresh=True) == {}
