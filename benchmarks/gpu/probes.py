@@ -7,7 +7,6 @@ runs them and writes their figures.
 
 from __future__ import annotations
 
-import hashlib
 import os
 import platform
 import tempfile
@@ -17,22 +16,9 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-ROOT = Path(__file__).resolve().parents[2]
+from benchmarks.gpu.code import ROOT, code_version
+
 RECIPE = ROOT / "recipes" / "gpu" / "walker_mcwae.yaml"
-
-
-def code_version() -> str:
-    """A hash of the code and recipes the check runs (the GPU machine's copy has no git).
-
-    The sha256 of every Python file under ``src/qdil`` and ``benchmarks`` and every GPU
-    recipe, by path and content: two checks share it when they ran the same code.
-    """
-    digest = hashlib.sha256()
-    files = [*(ROOT / "src" / "qdil").rglob("*.py"), *(ROOT / "benchmarks").rglob("*.py")]
-    files += (ROOT / "recipes" / "gpu").glob("*.yaml")
-    for path in sorted(files):
-        digest.update(str(path.relative_to(ROOT)).encode() + b"\0" + path.read_bytes())
-    return digest.hexdigest()[:16]
 
 
 def _sync(device: str) -> Callable[[], None]:
