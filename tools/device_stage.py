@@ -21,7 +21,6 @@ import argparse
 import hashlib
 import json
 import os
-import re
 import shutil
 import subprocess
 import sys
@@ -29,6 +28,7 @@ from importlib.metadata import PackageNotFoundError, distribution
 from pathlib import Path
 
 from packaging.requirements import Requirement
+from packaging.utils import canonicalize_name
 
 ROOT = Path(__file__).resolve().parents[1]
 CALL = 64 * 2**20  # bytes a call carries: the tree, the parts
@@ -43,15 +43,10 @@ ROOTS = ("qdil[warp,sweep]", "sybil")
 LEFT_OUT = {"wandb", "optuna", "torch", "imageio-ffmpeg"}  # torch: the machine's CUDA build
 
 
-def canonical(name: str) -> str:
-    """A distribution's name as PyPI compares names (PEP 503)."""
-    return re.sub(r"[-_.]+", "-", name).lower()
-
-
 def on_device() -> set[str]:
     """The distributions the machine's image holds (``tools/device_packages.txt``)."""
     lines = (Path(__file__).with_name("device_packages.txt")).read_text().splitlines()
-    return {canonical(line) for line in lines if line.strip() and not line.startswith("#")}
+    return {canonicalize_name(line) for line in lines if line.strip() and not line.startswith("#")}
 
 
 def needed() -> dict[str, str]:
@@ -64,7 +59,7 @@ def needed() -> dict[str, str]:
     todo = [Requirement(root) for root in ROOTS]
     while todo:
         requirement = todo.pop()
-        name = canonical(requirement.name)
+        name = canonicalize_name(requirement.name)
         if name != "qdil" and (name in found or name in have or name in LEFT_OUT):
             continue
         try:
