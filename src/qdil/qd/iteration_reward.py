@@ -9,6 +9,7 @@ absorbing tail where episodes terminate) and the evaluation's objective;
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -22,20 +23,24 @@ from qdil.reductions import sum_over
 from qdil.timing import REWARD_MODEL, section
 
 if TYPE_CHECKING:
-    from qdil.qd.state import Run
+    from qdil.rewards.base import RewardModel
 
 
 class TrainReward:
     """The per-step rewards the estimator trains on, a finiteness check, their mean per step.
 
     Args:
-        run: the run whose reward model scores the rollouts.
+        reward: the reward model that scores the rollouts.
+        iteration: the QD iteration (named by the finiteness check).
         tail: what an absorbing state adds where episodes terminate (``None``: nothing);
             the tally, the mean and ``returned`` leave it out.
     """
 
-    def __init__(self, run: Run, tail: AbsorbingTail | None = None) -> None:
-        self.run = run
+    def __init__(
+        self, reward: RewardModel, iteration: int, tail: AbsorbingTail | None = None
+    ) -> None:
+        self.reward = reward
+        self.iteration = iteration
         self.tail = tail
         self.total = 0.0
         self.steps = 0
@@ -45,8 +50,8 @@ class TrainReward:
     def __call__(self, rollout: Rollout) -> torch.Tensor:
         """(T, N) rewards of a training rollout (visits count toward the bonus)."""
         with section(REWARD_MODEL):
-            rewards = self.run.reward.predict_reward(rollout, update=True)
-        self.run.reward.check_finite(rewards, "rewards", self.run.state.iteration)
+            rewards = self.reward.predict_reward(rollout, update=True)
+        self.reward.check_finite(rewards, "rewards", self.iteration)
         valid = rollout.valid > 0
         self.total += float(sum_over(rewards[valid], 0))  # thread-invariant over 384,000 steps
         self.steps += int(valid.sum())
@@ -60,33 +65,44 @@ class TrainReward:
         return self.total / self.steps if self.steps else float("nan")
 
 
-def reward_functions(run: Run) -> tuple[TrainReward, Any]:
-    """The rewards the estimator trains on and the evaluation's objective, checked finite."""
-    reward = run.reward
+def reward_functions(
+    reward: RewardModel,
+    iteration: int,
+    horizon: int | None,
+    gamma: float | None,
+    scores_learned: bool,
+) -> tuple[TrainReward, Callable[[Rollout], torch.Tensor] | None]:
+    """The rewards the estimator trains on and the evaluation's objective, checked finite.
 
-    def checked(rewards: torch.Tensor) -> torch.Tensor:
-        reward.check_finite(rewards, "rewards", run.state.iteration)
-        return rewards
+    Args:
+        reward: the run's reward model.
+        iteration: the QD iteration they serve.
+        horizon: the episodes' time limit (``env.max_episode_steps``); absorbing states
+            need it.
+        gamma: the discount of an estimator that discounts per-step rewards (VPPO's GAE);
+            ``None`` for one that scores whole episodes (ES gradients), which gets the
+            episodes' absorbing tail.
+        scores_learned: whether evaluations score under the reward model; ``False`` (true
+            fitness or the true reward) gives no evaluation reward.
 
+    Returns:
+        The training reward and the evaluation's (T, N) reward function, or ``None``.
+    """
     train_tail = eval_tail = None
     if reward.absorbing:
-        horizon, iteration = run.eval_env.max_episode_steps, run.state.iteration
         if horizon is None:
             raise ValueError("absorbing states need env.max_episode_steps (the time limit)")
         eval_tail = AbsorbingTail(reward, horizon, None, iteration)
-        # an estimator that discounts per-step rewards (VPPO's GAE) declares its gamma;
-        # one that scores whole episodes (ES gradients) gets the episodes' tail
-        gamma = getattr(run.estimator, "gamma", None)
         train_tail = AbsorbingTail(reward, horizon, gamma, iteration)
-    train_reward = TrainReward(run, train_tail)
+    train_reward = TrainReward(reward, iteration, train_tail)
 
     def eval_reward(rollout: Rollout) -> torch.Tensor:
         with section(REWARD_MODEL):
-            rewards = checked(reward.predict_reward(rollout))
+            rewards = reward.predict_reward(rollout)
+        reward.check_finite(rewards, "rewards", iteration)
         return rewards if eval_tail is None else rewards + eval_tail(rollout)
 
-    uses_true = run.qd.fitness == "true" or reward.is_true_reward
-    return train_reward, (None if uses_true else eval_reward)
+    return train_reward, (eval_reward if scores_learned else None)
 
 
 def walk_survival(
@@ -106,12 +122,14 @@ def walk_survival(
     return tally.metrics()
 
 
-def update_reward(run: Run, expert: Any, policy: TransitionBatch) -> dict[str, float]:
+def update_reward(
+    reward: RewardModel, iteration: int, expert: Any, policy: TransitionBatch
+) -> dict[str, float]:
     """The reward model's once-per-iteration update (decision D3), its metrics checked finite."""
     with section(REWARD_MODEL):
-        reward_metrics = run.reward.update(expert, policy, run.state.iteration)
-        if run.reward.absorbing:
-            run.reward.price_absorbing(policy)
+        reward_metrics = reward.update(expert, policy, iteration)
+        if reward.absorbing:
+            reward.price_absorbing(policy)
     for key, value in reward_metrics.items():
-        run.reward.check_finite(torch.as_tensor(value), f"update metric {key}", run.state.iteration)
+        reward.check_finite(torch.as_tensor(value), f"update metric {key}", iteration)
     return reward_metrics

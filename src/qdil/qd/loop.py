@@ -28,7 +28,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import replace
 from functools import partial
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import torch
@@ -44,8 +44,10 @@ from qdil.rl.normalize import RunningMeanStd, fields_from_stats, stats_from_fiel
 from qdil.timing import ARCHIVE_WORK, Stopwatch, section
 
 if TYPE_CHECKING:
-    from qdil.qd.state import Run
-    from qdil.seats import PhaseResult
+    from qdil.config import LoggingConfig, QDConfig
+    from qdil.qd.archives import RunArchives
+    from qdil.qd.state import LoopState, Run
+    from qdil.seats import PhaseResult, SearchEmitter
 
 
 @contextmanager
@@ -64,8 +66,20 @@ def quiet_empty_archive() -> Iterator[None]:
         yield
 
 
-def _objective(run: Run, evaluation: Evaluation) -> np.ndarray:
-    return evaluation.true_objective if run.qd.fitness == "true" else evaluation.objective
+def _objective(fitness: str, evaluation: Evaluation) -> np.ndarray:
+    """(n,) what the archive ranks by: the learned return, or the true one (``qd.fitness``)."""
+    return evaluation.true_objective if fitness == "true" else evaluation.objective
+
+
+def _iteration_rewards(run: Run) -> tuple[TrainReward, Any]:
+    """This iteration's training and evaluation rewards (``reward_functions`` of the run's)."""
+    return reward_functions(
+        run.reward,
+        run.state.iteration,
+        run.eval_env.max_episode_steps,
+        getattr(run.estimator, "gamma", None),
+        scores_learned=not (run.qd.fitness == "true" or run.reward.is_true_reward),
+    )
 
 
 def qd_iteration(run: Run) -> dict[str, float]:
@@ -76,7 +90,7 @@ def qd_iteration(run: Run) -> dict[str, float]:
     if run.estimator is None:
         return gradient_free_iteration(run)
     state, estimator, scheduler, emitter = run.state, run.estimator, run.scheduler, run.emitter
-    train_reward, eval_reward = reward_functions(run)
+    train_reward, eval_reward = _iteration_rewards(run)
     qd = run.qd
     watch = Stopwatch()
 
@@ -102,7 +116,7 @@ def qd_iteration(run: Run) -> dict[str, float]:
             qd.deterministic_eval,
         )
     fields = fields_from_stats(stats, mean_eval.lengths)
-    objective = _objective(run, mean_eval)  # the run's own: learned, or true with fitness true
+    objective = _objective(qd.fitness, mean_eval)  # learned, or true with fitness true
     with quiet_empty_archive(), section(ARCHIVE_WORK):
         scheduler.tell_dqd(objective, mean_eval.measures, jacobian, **fields)
     run.archives.add(theta[None], objective, mean_eval.true_objective, mean_eval.measures, fields)
@@ -112,7 +126,7 @@ def qd_iteration(run: Run) -> dict[str, float]:
         raise RuntimeError("the scheduler's ask() differs from the emitter's proposal")
     fields = fields_from_stats(branch_stats, evaluation.lengths)
     restarts = emitter.restarts
-    objective = _objective(run, evaluation)
+    objective = _objective(qd.fitness, evaluation)
     with quiet_empty_archive(), section(ARCHIVE_WORK):
         scheduler.tell(objective, evaluation.measures, **fields)
     run.archives.add(branches, objective, evaluation.true_objective, evaluation.measures, fields)
@@ -140,35 +154,44 @@ def qd_iteration(run: Run) -> dict[str, float]:
             logp = partial(run.scorer.log_probs, walk.solutions[0], walk.stats)
             expert = replace(expert, log_probs=logp(expert.obs, expert.actions))
             policy = replace(policy, log_probs=logp(policy.obs, policy.actions))
-        reward_metrics = update_reward(run, expert, policy)
+        reward_metrics = update_reward(run.reward, state.iteration, expert, policy)
 
     # ---- 5. metrics
     steps = jacobian_phase.env_steps + walk.env_steps + mean_eval.env_steps + evaluation.env_steps
     seconds = time.perf_counter() - watch.start
     state.count(steps, seconds)
-    metrics = _common_metrics(run, steps, seconds, reward_metrics, train_reward)
+    learned = not run.reward.is_true_reward
+    metrics = _archive_metrics(run.archives, run.task, learned)
+    returns, _ = run.executor.pop_episode_stats()
+    metrics |= _training_metrics(returns, reward_metrics, train_reward, learned)
+    metrics |= _throughput(state, steps, seconds)
     metrics |= walk_survival(walk.rollouts, train_reward.returned, coefficients)
-    metrics |= _search_metrics(run, jacobian_phase, walk, mean_eval, restarts)
+    metrics |= _search_metrics(emitter, jacobian_phase, walk, mean_eval, qd.fitness, restarts)
     return metrics | watch.metrics()
 
 
 def _search_metrics(
-    run: Run, jacobian: PhaseResult, walk: PhaseResult, mean_eval: Evaluation, restarts: int
+    emitter: SearchEmitter,
+    jacobian: PhaseResult,
+    walk: PhaseResult,
+    mean_eval: Evaluation,
+    fitness: str,
+    restarts: int,
 ) -> dict[str, float]:
     """The estimator's diagnostics, θ_μ's scores and measures, the emitter's state.
 
     Args:
-        run: the run, after the iteration's walk.
+        emitter: the search emitter, after the iteration's walk.
         jacobian: the Jacobian phase.
         walk: the walk.
         mean_eval: θ_μ's evaluation.
+        fitness: ``qd.fitness``, what θ_μ's objective is.
         restarts: the emitter's restarts before this iteration's ``tell``.
     """
-    emitter = run.emitter
     metrics = {f"rl/jacobian_{k}": v for k, v in jacobian.diagnostics.items()}
     metrics |= {f"rl/walk_{k}": v for k, v in walk.diagnostics.items()}
     metrics |= {
-        "search/objective": float(_objective(run, mean_eval)[0]),
+        "search/objective": float(_objective(fitness, mean_eval)[0]),
         "search/true_objective": float(mean_eval.true_objective[0]),
         "emitter/restarts": float(emitter.restarts),
         "emitter/restarted": float(emitter.restarts > restarts),
@@ -190,7 +213,7 @@ def gradient_free_iteration(run: Run) -> dict[str, float]:
     bonus counts.
     """
     state, scheduler, qd = run.state, run.scheduler, run.qd
-    train_reward, eval_reward = reward_functions(run)
+    train_reward, eval_reward = _iteration_rewards(run)
     tic = time.perf_counter()
     with section(ARCHIVE_WORK):
         solutions = scheduler.ask()
@@ -210,7 +233,7 @@ def gradient_free_iteration(run: Run) -> dict[str, float]:
         qd.deterministic_eval,
     )
     fields = fields_from_stats(stats, evaluation.lengths)
-    objective = _objective(run, evaluation)
+    objective = _objective(qd.fitness, evaluation)
     with quiet_empty_archive(), section(ARCHIVE_WORK):
         scheduler.tell(objective, evaluation.measures, **fields)
     run.archives.add(solutions, objective, evaluation.true_objective, evaluation.measures, fields)
@@ -220,10 +243,14 @@ def gradient_free_iteration(run: Run) -> dict[str, float]:
         for rollout in rollouts:
             train_reward(rollout)
         policy = TransitionBatch.cat([r.transitions() for r in rollouts])
-        reward_metrics = update_reward(run, run.expert, policy)
+        reward_metrics = update_reward(run.reward, state.iteration, run.expert, policy)
     seconds = time.perf_counter() - tic
     state.count(evaluation.env_steps, seconds)
-    metrics = _common_metrics(run, evaluation.env_steps, seconds, reward_metrics, train_reward)
+    learned = not run.reward.is_true_reward
+    metrics = _archive_metrics(run.archives, run.task, learned)
+    returns, _ = run.executor.pop_episode_stats()
+    metrics |= _training_metrics(returns, reward_metrics, train_reward, learned)
+    metrics |= _throughput(state, evaluation.env_steps, seconds)
     emitters = search_emitters(scheduler)
     metrics |= {
         "search/objective": float(np.max(objective)),
@@ -233,54 +260,63 @@ def gradient_free_iteration(run: Run) -> dict[str, float]:
     return metrics
 
 
-def _common_metrics(
-    run: Run,
-    steps: int,
-    seconds: float,
+def _archive_metrics(archives: RunArchives, task: str, learned: bool) -> dict[str, float]:
+    """``qd/*`` of the true archive and, for a learned reward, ``qd_learned/*``."""
+    offset = QD_OFFSETS.get(task, 0.0)
+    metrics = {f"qd/{k}": v for k, v in qd_metrics(archives.true, offset).items()}
+    if learned:
+        deployable = qd_metrics(archives.deployable, offset)
+        metrics |= {f"qd_learned/{k}": v for k, v in deployable.items()}
+    return metrics
+
+
+def _training_metrics(
+    returns: list[float],
     reward_metrics: dict[str, float],
     train_reward: TrainReward,
+    learned: bool,
 ) -> dict[str, float]:
-    """The archives', reward's and throughput's metrics of an iteration of ``seconds``.
+    """The training episodes' return, the reward model's update and what RL was handed.
 
-    Reads the run's totals after the iteration counted itself (``LoopState.count``).
+    Args:
+        returns: true returns of the training episodes that ended this iteration.
+        reward_metrics: the reward model's update metrics.
+        train_reward: the iteration's training reward, after its rollouts.
+        learned: whether the reward is learned (not the true reward).
     """
-    state = run.state
-    offset = QD_OFFSETS.get(run.task, 0.0)
-    metrics = {f"qd/{k}": v for k, v in qd_metrics(run.archives.true, offset).items()}
-    if not run.reward.is_true_reward:
-        metrics |= {
-            f"qd_learned/{k}": v for k, v in qd_metrics(run.archives.deployable, offset).items()
-        }
-    returns, _ = run.executor.pop_episode_stats()
-    if returns:
-        metrics["rl/train_episode_return"] = float(np.mean(returns))
+    metrics = {"rl/train_episode_return": float(np.mean(returns))} if returns else {}
     metrics |= {f"reward/{k}": float(v) for k, v in reward_metrics.items()}
-    if not run.reward.is_true_reward:
+    if learned:
         # what RL is handed per step; the bonus wrapper splits it into learned and bonus
         metrics["reward/train_per_step"] = train_reward.per_step
         metrics.setdefault("reward/learned_per_step", train_reward.per_step)
     metrics |= train_reward.survival.metrics()
     if train_reward.tail is not None:  # r_a where training episodes terminated
         metrics["reward/absorbing"] = train_reward.tail.mean
-    metrics |= {
+    return metrics
+
+
+def _throughput(state: LoopState, steps: int, seconds: float) -> dict[str, float]:
+    """``perf/*`` of an iteration of ``steps`` in ``seconds``, after ``LoopState.count``."""
+    return {
         "perf/env_steps": float(state.env_steps),
         "perf/sps": steps / seconds,
         "perf/iter_seconds": seconds,
         "perf/elapsed_seconds": state.seconds,
     }
-    return metrics
 
 
-def _checkpoint_due(run: Run, seconds_since_save: float) -> bool:
+def _checkpoint_due(
+    state: LoopState, qd: QDConfig, logging: LoggingConfig, seconds_since_save: float
+) -> bool:
     """Whether the iteration just finished ends with a checkpoint.
 
     Every ``checkpoint_every`` iterations, at the last one (``qd.iterations`` or the
     ``qd.env_steps`` budget), and, when
     ``checkpoint_minutes`` is positive, once that much wall time passed since the last save.
     """
-    iteration, logging = run.state.iteration, run.logging
-    if iteration % logging.checkpoint_every == 0 or finished(
-        run.qd, iteration, run.state.env_steps
+    if state.iteration % logging.checkpoint_every == 0 or finished(
+        qd, state.iteration, state.env_steps
     ):
         return True
     minutes = logging.checkpoint_minutes
@@ -301,7 +337,7 @@ def next_iteration(run: Run, saved: float) -> tuple[dict[str, float], float]:
         run.state.iteration += 1
         metrics = qd_iteration(run)
         run.tracker.log(metrics, run.state.iteration, run)
-        if _checkpoint_due(run, time.monotonic() - saved):
+        if _checkpoint_due(run.state, run.qd, run.logging, time.monotonic() - saved):
             save_checkpoint(run)
             saved = time.monotonic()
     return metrics, saved
