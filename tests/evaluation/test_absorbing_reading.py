@@ -151,3 +151,35 @@ def test_training_reading_of_a_run_without_falls_and_bad_input(reading, tmp_path
     with pytest.raises(ValueError, match=r"humanoid_gail_absorbing-seed1: no metrics\.csv"):
         reading.training(run)
     assert reading.spans([1, 2, 3, 7, 9, 10]) == "1–3, 7, 9–10"
+
+
+def _probe(name: str):
+    spec = importlib.util.spec_from_file_location(
+        name, ROOT / "benchmarks" / "probes" / f"{name}.py"
+    )
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # its dataclass looks its module up there
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_the_match_reading_finds_wqdil_under_gail_on_the_unclipped_humanoid_records():
+    """The clip protocol's second target, read on the earlier runs it was written against."""
+    true, deployable = _probe("match_reading").matches(
+        RECORDS, "humanoid_mcwae_absorbing", "humanoid_gail_absorbing"
+    )
+    assert sorted(true.method) == [1, 2] and sorted(true.against) == [1, 2]
+    mine, theirs = true.means
+    assert round(mine, -3) == 150_000 and round(theirs, -3) == 338_000
+    assert true.against_std == pytest.approx(7_100, rel=0.02)
+    assert not true.protocol_met and not true.ordering_met
+    assert deployable.archive == "deployable" and not deployable.ordering_met
+
+
+def test_the_match_reading_names_a_run_not_rescored(tmp_path: Path):
+    run = tmp_path / "humanoid_gail_absorbing-seed3"
+    run.mkdir()
+    with pytest.raises(ValueError, match=r"seed3: no eval.json; re-score it first"):
+        _probe("match_reading").scores(tmp_path, "humanoid_gail_absorbing")
+    with pytest.raises(ValueError, match=r"no run named humanoid_mcwae_clip-seedN"):
+        _probe("match_reading").scores(tmp_path, "humanoid_mcwae_clip")
