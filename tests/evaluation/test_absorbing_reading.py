@@ -15,15 +15,19 @@ ROOT = Path(__file__).resolve().parents[2]
 RECORDS = ROOT / "docs/reports/absorbing-evidence/runs"
 
 
-@pytest.fixture(scope="module")
-def reading():
+def _probe(name: str):
     spec = importlib.util.spec_from_file_location(
-        "absorbing_reading", ROOT / "benchmarks" / "probes" / "absorbing_reading.py"
+        name, ROOT / "benchmarks" / "probes" / f"{name}.py"
     )
     module = importlib.util.module_from_spec(spec)
     sys.modules[spec.name] = module  # its dataclass looks its module up there
     spec.loader.exec_module(module)
     return module
+
+
+@pytest.fixture(scope="module")
+def reading():
+    return _probe("absorbing_reading")
 
 
 def test_walker_seed5_reads_as_the_miss_the_protocol_page_reports(reading):
@@ -151,16 +155,6 @@ def test_training_reading_of_a_run_without_falls_and_bad_input(reading, tmp_path
     with pytest.raises(ValueError, match=r"humanoid_gail_absorbing-seed1: no metrics\.csv"):
         reading.training(run)
     assert reading.spans([1, 2, 3, 7, 9, 10]) == "1–3, 7, 9–10"
-
-
-def _probe(name: str):
-    spec = importlib.util.spec_from_file_location(
-        name, ROOT / "benchmarks" / "probes" / f"{name}.py"
-    )
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # its dataclass looks its module up there
-    spec.loader.exec_module(module)
-    return module
 
 
 def test_the_match_reading_finds_wqdil_under_gail_on_the_unclipped_humanoid_records():
