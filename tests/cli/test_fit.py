@@ -134,14 +134,16 @@ def test_a_recipe_of_an_older_run_with_a_moved_class_still_parses(tmp_path: Path
 
 
 def test_a_switch_of_reward_model_leaves_the_recipes_form_behind() -> None:
-    """``--reward gail`` on WQDIL's recipe trains GAIL with GAIL's form, not the critic's."""
+    """``--reward gail`` on WQDIL's recipe trains GAIL with GAIL's form, not the critic's,
+    and keeps the recipe's shared options (a fall's absorbing state, the inputs' clip)."""
     from qdil.cli.fit import parse_fit
 
     flagship = str(Path(__file__).resolve().parents[2] / "recipes" / "walker_mcwae.yaml")
     kept = parse_fit([flagship])[0].reward.init_args
-    assert kept.reward_form == "standardized" and kept.batch_size == 120
+    assert kept.reward_form == "standardized_logit" and kept.batch_size == 120
     switched = parse_fit([flagship, "--reward", "gail"])[0].reward.init_args
     assert switched.reward_form is None and switched.batch_size == 120  # GAIL's log1-d
+    assert (switched.absorbing, switched.feature_clip) == ("floor", 10.0)
     chosen = parse_fit([flagship, "--reward=gail", "--reward.reward_form", "calibrated"])[0]
     assert chosen.reward.init_args.reward_form == "calibrated"
 
