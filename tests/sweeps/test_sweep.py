@@ -3,8 +3,10 @@ end, a bad override stops it before anything starts, and a crashed trial stops n
 
 from __future__ import annotations
 
+import json
 import os
 import re
+import shutil
 import signal
 import time
 from pathlib import Path
@@ -44,6 +46,12 @@ def _ray_down():
     yield
     if ray.is_initialized():
         ray.shutdown()
+
+
+def scores(run: Path) -> dict:
+    """A run's ``eval.json`` without what names the run and the machine."""
+    summary = json.loads((run / "eval.json").read_text())
+    return {k: v for k, v in summary.items() if k not in ("run", "provenance")}
 
 
 def same_runs(a: Path, b: Path) -> bool:
@@ -124,10 +132,13 @@ def test_a_killed_sweep_run_again_ends_as_its_plain_fits(one_ray, plain, tmp_pat
     root, report = tmp_path / "runs", tmp_path / "report"
     command = ["sweep", str(SMOKE), "--seeds", *SEEDS]
     command += ["--root", str(root), "--episodes", "1", "--report", str(report)]
+    # a checkpoint every iteration: the kill lands with two of three iterations to go (with
+    # the recipe's every 2, both trials could end their last one before the kill)
+    command += ["--logging.checkpoint_every", "1"]
     sweep = start_qdil(*command, cwd=tmp_path)
     deadline = time.monotonic() + 300
     while time.monotonic() < deadline and not list(root.glob("*/checkpoints/last.pt")):
-        time.sleep(0.5)
+        time.sleep(0.1)
     os.killpg(sweep.pid, signal.SIGKILL)
     sweep.wait()
     assert list(root.glob("*/checkpoints/last.pt")), "no trial reached a checkpoint"
@@ -143,6 +154,11 @@ def test_a_killed_sweep_run_again_ends_as_its_plain_fits(one_ray, plain, tmp_pat
         assert (run / "eval.json").is_file()  # re-scored
         assert "wandb_group: sweep-" in (run / "config.yaml").read_text()  # W&B groups them
     assert (report / "report.md").is_file()
+    # the trial's re-scoring ran in its fit's process: the same scores as a `qdil eval`
+    alone = tmp_path / "alone"
+    shutil.copytree(plain / "walker_true-seed0", alone)
+    main(["eval", str(alone), "--episodes", "1", "--num-threads", "1"])
+    assert scores(root / "walker_true-seed0") == scores(alone)
     before = {p: p.stat().st_mtime_ns for p in root.glob("walker_*/**/*")}
     qdil_here(command, tmp_path, WANDB_MODE="disabled")  # as user_env gives a process
     assert before == {p: p.stat().st_mtime_ns for p in root.glob("walker_*/**/*")}

@@ -105,19 +105,9 @@ def run_sweep(
         search: sample options of ``trials[0]`` with Optuna (None: run ``trials`` as they are).
         every: seconds between two prints of the trials' table.
     """
-    import ray
     from ray import tune
 
-    check_reachable(resources.address)  # ray.init would wait minutes for a dead address
-    started = not ray.is_initialized()
-    if started:
-        ray.init(
-            address=ray_address(resources.address),
-            include_dashboard=False,
-            log_to_driver=False,
-            logging_level=logging.ERROR,  # not "Started a local Ray instance" and the like
-        )
-    try:
+    with ray_session(resources.address):
         specs = [
             {**asdict(t), "recipe": str(t.recipe), "root": str(t.root), "cwd": str(t.cwd)}
             for t in trials
@@ -153,15 +143,39 @@ def run_sweep(
         with _quiet_tune():
             results = tuner.fit()
         table.show(force=True)
-    finally:
-        if started:
-            ray.shutdown()
     failed = {_name(r): _message(r.error) for r in results if r.error is not None}
     scored = [r for r in results if r.error is None and (r.metrics or {}).get("rescored")]
     ranked = [(_name(r), r.metrics["objective"], r.config.get("space", {})) for r in scored]
     if search is not None:
         ranked.sort(key=lambda row: row[1], reverse=search.mode == "max")
     return Outcome(failed, ranked)
+
+
+@contextlib.contextmanager
+def ray_session(address: str | None) -> Iterator[None]:
+    """Ray for the block: joined where this process has it already, else started and ended.
+
+    A spec's stages share one (each stage's sweep joins it), so Ray starts once a sweep.
+
+    Args:
+        address: a Ray cluster's address (``None``: Ray on this machine, or ``RAY_ADDRESS``).
+    """
+    import ray
+
+    check_reachable(address)  # ray.init would wait minutes for a dead address
+    if ray.is_initialized():
+        yield
+        return
+    ray.init(
+        address=ray_address(address),
+        include_dashboard=False,
+        log_to_driver=False,
+        logging_level=logging.ERROR,  # not "Started a local Ray instance" and the like
+    )
+    try:
+        yield
+    finally:
+        ray.shutdown()
 
 
 @contextlib.contextmanager

@@ -9,7 +9,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from qdil.sweeps.driver import Resources, run_sweep
+from qdil.sweeps.driver import Resources, ray_session, run_sweep
 from qdil.sweeps.spec import Spec, Stage
 
 
@@ -21,6 +21,18 @@ def run_spec(spec: Spec, address: str | None, report: Path | None = None) -> dic
         address: a Ray cluster's address (None: this machine, or ``RAY_ADDRESS``).
         report: a report over all the spec's trials, written here (None: the spec's own).
     """
+    with ray_session(address):  # one Ray for every stage
+        failed = _run_stages(spec, address)
+    if failed:
+        return failed
+    out = report or spec.report
+    if out is not None:
+        _report([t for stage in spec.stages for t in stage.trials], out)
+    return {}
+
+
+def _run_stages(spec: Spec, address: str | None) -> dict[str, str]:
+    """Each stage in order, its demonstrations and report after it; the first failed trials."""
     for number, stage in enumerate(spec.stages, 1):
         print(
             f"qdil sweep {spec.name}: stage {number} of {len(spec.stages)}, {stage.name}: "
@@ -38,9 +50,6 @@ def run_spec(spec: Spec, address: str | None, report: Path | None = None) -> dic
             make_demos(stage)
         if stage.report is not None:
             _report(stage.trials, stage.report)
-    out = report or spec.report
-    if out is not None:
-        _report([t for stage in spec.stages for t in stage.trials], out)
     return {}
 
 

@@ -1,7 +1,8 @@
 """One trial of a sweep, as Ray Tune runs it: ``qdil fit``, then ``qdil eval``, in a child process.
 
-The child is the command a user would type (so a trial equals ``qdil fit`` of its recipe,
-seed and options, bit for bit), with ``--env.num_threads`` set to the trial's CPUs. While it
+The child runs the commands a user would type (so a trial equals ``qdil fit`` of its recipe,
+seed and options, bit for bit: :mod:`qdil.cli.trial`), with ``--env.num_threads`` set to
+the trial's CPUs. While it
 runs, each new row of the run's ``metrics.csv`` is reported to Tune. A lock on the run's
 folder (:func:`guard`), held by the trial and its child, keeps any second process out, and
 the child dies with the trial's thread (Linux's parent-death signal), so a killed sweep
@@ -72,14 +73,18 @@ def _die_with_parent() -> None:  # pragma: no cover - runs in the child between 
     libc.prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
 
 
-def run_command(args: list[str], lock: int, threads: int, log: Path, cwd: Path) -> None:
-    """``qdil ARGS`` in a child process that holds ``lock`` and dies with this thread.
+def run_commands(
+    fit: list[str], episodes: int, run_dir: Path, lock: int, threads: int, log: Path, cwd: Path
+) -> None:
+    """``qdil FIT``, then its ``qdil eval`` where due, in one child process.
+
+    The child (:mod:`qdil.cli.trial`) holds ``lock`` and dies with this thread.
 
     It runs in ``cwd`` where that folder exists here (a cluster node without it: in Ray's
     working folder, where relative paths then fail with the child's own error).
 
     Raises:
-        TrialError: the command failed, with the end of its output.
+        TrialError: a command failed, with the end of its output.
     """
     env = dict(os.environ, QDIL_NUM_THREADS=str(threads), OMP_NUM_THREADS=str(threads))
     address = _cluster_address()
@@ -87,12 +92,12 @@ def run_command(args: list[str], lock: int, threads: int, log: Path, cwd: Path) 
         env["RAY_ADDRESS"] = address
     log.parent.mkdir(parents=True, exist_ok=True)
     with open(log, "ab") as out:
-        out.write(f"$ qdil {' '.join(args)}\n# started {_now()}\n".encode())
+        out.write(f"$ qdil {' '.join(fit)}\n# started {now()}\n".encode())
         if os.environ.get("CUDA_VISIBLE_DEVICES"):  # set by Ray for a trial given GPUs
             out.write(f"# the GPUs Ray gave this trial: {_gpus()}\n".encode())
         out.flush()
         done = subprocess.run(
-            [sys.executable, "-m", "qdil.cli", *args],
+            [sys.executable, "-m", "qdil.cli.trial", str(run_dir), str(episodes), *fit],
             stdout=out,
             stderr=subprocess.STDOUT,
             env=env,
@@ -101,17 +106,18 @@ def run_command(args: list[str], lock: int, threads: int, log: Path, cwd: Path) 
             preexec_fn=_die_with_parent if sys.platform == "linux" else None,
             check=False,
         )
-        out.write(f"# ended {_now()} with exit status {done.returncode}\n".encode())
+        out.write(f"# ended {now()} with exit status {done.returncode}\n".encode())
     if done.returncode:
         tail = log.read_text(errors="replace")[-3000:]
-        raise TrialError(f"qdil {args[0]} exited with {done.returncode}; its output ends:\n{tail}")
+        raise TrialError(f"the trial's qdil command exited with {done.returncode}; its output "
+                         f"ends:\n{tail}")  # fmt: skip
 
 
-def _now() -> str:
+def now() -> str:
     """Wall-clock time for the trial's log: ISO 8601 and Unix seconds (what tests compare)."""
-    now = time.time()
-    stamp = time.strftime("%Y-%m-%dT%H:%M:%S%z", time.localtime(now))
-    return f"{stamp} (unix {now:.3f})"
+    seconds = time.time()
+    stamp = time.strftime("%Y-%m-%dT%H:%M:%S%z", time.localtime(seconds))
+    return f"{stamp} (unix {seconds:.3f})"
 
 
 def _gpus() -> str:
@@ -196,20 +202,15 @@ def run_trial(
     log = trial.root / LOCKS / f"{trial.name}.log"
     metrics = trial.run_dir / "metrics.csv"
     with guard(trial) as lock:
-        args = ["fit", *trial.fit_args(), "--env.num_threads", str(threads)]
+        fit = ["fit", *trial.fit_args(), "--env.num_threads", str(threads)]
         # rows a resumed run keeps are not reported again, but the last one is (the table)
         resumed = (trial.run_dir / CONFIG_NAME).is_file()
         rows = MetricsFollower(metrics, max(0, last_iteration(metrics) - 1) if resumed else 0)
-        work = partial(run_command, args, lock, threads, log, trial.cwd)
+        work = partial(run_commands, fit, episodes, trial.run_dir, lock, threads, log, trial.cwd)
         with _in_background(work) as finished:
-            while not finished():
-                time.sleep(every)
+            while not finished(every):  # a finished command ends the wait at once
                 follow(rows, report, metric)
         follow(rows, report, metric)
-        if episodes and not rescored(trial.run_dir, episodes):
-            command = ["eval", str(trial.run_dir), "--episodes", str(episodes)]
-            command += ["--num-threads", str(threads)]
-            run_command(command, lock, threads, log, trial.cwd)
     report({"done": 1.0, **(_rescored(trial.run_dir, metric) if metric else {})})
 
 
@@ -222,8 +223,11 @@ def _rescored(run_dir: Path, metric: str) -> dict[str, Any]:
 
 
 @contextlib.contextmanager
-def _in_background(work: Callable[[], None]) -> Iterator[Callable[[], bool]]:
-    """Run ``work`` in a thread; yields whether it finished; re-raises its error after."""
+def _in_background(work: Callable[[], None]) -> Iterator[Callable[[float], bool]]:
+    """Run ``work`` in a thread; re-raise its error after.
+
+    Yields a wait of at most so many seconds that says whether ``work`` finished.
+    """
     import threading
 
     errors: list[BaseException] = []
@@ -236,7 +240,12 @@ def _in_background(work: Callable[[], None]) -> Iterator[Callable[[], bool]]:
 
     thread = threading.Thread(target=target, daemon=True)
     thread.start()
-    yield lambda: not thread.is_alive()
+
+    def finished(seconds: float) -> bool:
+        thread.join(seconds)
+        return not thread.is_alive()
+
+    yield finished
     thread.join()
     if errors:
         raise errors[0]
