@@ -13,26 +13,32 @@ Two things a reader does are not done here, and the shell says so where a block 
   and ``pip install`` of a folder the page made goes into a folder of the test's own (on
   ``PYTHONPATH``), so the test environment stays as it was;
 - training at full length: ``qdil`` is ``short.py``'s, under ``QDIL_DOCS_SHORT``.
+
+A page's ``qdil`` runs in a fork of a server that has the heavy libraries imported
+(:mod:`warm`), one per test worker, started with the first page.
 """
 
 from __future__ import annotations
 
+import atexit
 import os
 import shlex
 import signal
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 from sybil import Example
 
-SHORT = Path(__file__).with_name("short.py")
+WARM = Path(__file__).with_name("warm.py")
+_server: list[str] = []  # this worker's warm server's socket, once started ("": it failed)
 
 # Defined in every block before the page's commands. Installs named here are what the test
 # environment holds already; anything else a page installs is a folder it wrote.
 PRELUDE = r"""
 set -eo pipefail
-qdil() { python "$DOCS_SHORT_QDIL" "$@"; }
+qdil() { python "$DOCS_QDIL" "$@"; }
 python3() {
     if [ "${1-}" = -m ] && [ "${2-}" = venv ]; then
         echo "docs test: '$*' not run: the test runs in the environment it was installed in"
@@ -73,7 +79,8 @@ class ShellSession:
             PATH=f"{Path(sys.executable).parent}{os.pathsep}{env.get('PATH', '')}",
             PYTHONPATH=os.pathsep.join(p for p in (str(site), env.get("PYTHONPATH")) if p),
             DOCS_SITE=str(site),
-            DOCS_SHORT_QDIL=str(SHORT),
+            DOCS_QDIL=str(WARM),
+            DOCS_WARM=warm_server(),
         )
         env.setdefault("QDIL_DOCS_SHORT", "1")
         self.cwd = folder
@@ -124,3 +131,33 @@ class ShellSession:
             f"the block exited with {done.returncode}\n--- stdout (end) ---\n"
             f"{done.stdout[-4000:]}\n--- stderr (end) ---\n{done.stderr[-4000:]}"
         )
+
+
+def warm_server() -> str:
+    """The socket of this worker's warm ``qdil`` server, started on first use ("": none).
+
+    ``QDIL_DOCS_WARM=0`` starts none: each ``qdil`` then starts a process of its own.
+    """
+    if _server:
+        return _server[0]
+    if os.environ.get("QDIL_DOCS_WARM") == "0":
+        _server.append("")
+        return ""
+    path = os.path.join(tempfile.mkdtemp(prefix="qdil-warm-"), "socket")
+    env = {k: v for k, v in os.environ.items() if k != "QDIL_PLUGIN_PATH"}
+    server = subprocess.Popen(
+        [sys.executable, str(WARM), "serve", path],
+        stdin=subprocess.DEVNULL,
+        stdout=subprocess.PIPE,
+        env=env,
+        cwd=os.path.dirname(path),
+        start_new_session=True,
+    )
+    ready = server.stdout.readline().strip() == b"ready" if server.stdout else False
+    if not ready:  # each page's qdil then starts a process of its own, as a reader's does
+        server.kill()
+        path = ""
+    else:
+        atexit.register(os.killpg, server.pid, signal.SIGKILL)
+    _server.append(path)
+    return path
