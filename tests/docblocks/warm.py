@@ -32,8 +32,10 @@ MESSAGE = 1 << 20
 
 def serve(path: str) -> None:
     """Import :data:`HEAVY`, then fork a command for each request on the socket ``path``."""
+    import ctypes
     import importlib
 
+    ctypes.CDLL(None).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG: end with the test worker
     for name in HEAVY:
         importlib.import_module(name)
     signal.signal(signal.SIGCHLD, signal.SIG_IGN)  # the forks are reaped as they end
