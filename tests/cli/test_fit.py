@@ -100,23 +100,25 @@ def test_resume_of_a_directory_without_a_run_is_refused(tmp_path: Path, capsys) 
     assert code != 0 and "not a qdil run directory" in err
 
 
-def test_bad_checkpoints_are_reported_with_the_file(tmp_path: Path, monkeypatch) -> None:
-    monkeypatch.chdir(tmp_path)  # the run is made in this process; its resumes are processes
+def test_bad_checkpoints_are_reported_with_the_file(tmp_path: Path, monkeypatch, capsys) -> None:
+    """The messages are the subject: the run and its resumes run in this process, and an
+    error that is not the user's would raise here instead of printing a message."""
+    monkeypatch.chdir(tmp_path)
     monkeypatch.delenv("QDIL_PLUGIN_PATH", raising=False)
     main(["fit", str(SMOKE), "--name", "ck", "--qd.iterations", "2"])
     run_dir = tmp_path / "runs" / "ck"
     checkpoint = run_dir / "checkpoints" / "last.pt"
     config = (run_dir / "config.yaml").read_text()
     (run_dir / "config.yaml").write_text(config.replace("task: Walker2d-v5", "task: Hopper-v5"))
-    result = qdil("fit", "--resume", str(run_dir), cwd=tmp_path)
+    code, _, err = cli(["fit", "--resume", str(run_dir)], capsys)
     # the checkpoint stores its recipe: the edited key is named before anything is built
-    assert "env.task: 'Walker2d-v5' -> 'Hopper-v5'" in result.stderr
+    assert code != 0 and "env.task: 'Walker2d-v5' -> 'Hopper-v5'" in err
     (run_dir / "config.yaml").write_text(config)
     checkpoint.write_bytes(checkpoint.read_bytes()[:1000])
-    result = qdil("fit", "--resume", str(run_dir), cwd=tmp_path)
-    assert result.returncode != 0
-    assert f"{checkpoint} is not a readable qdil checkpoint" in result.stderr
-    assert "Traceback" not in result.stderr
+    code, _, err = cli(["fit", "--resume", str(run_dir)], capsys)
+    assert code != 0
+    assert f"{checkpoint} is not a readable qdil checkpoint" in err
+    assert "Traceback" not in err
 
 
 def test_a_recipe_of_an_older_run_with_a_moved_class_still_parses(tmp_path: Path) -> None:
