@@ -30,6 +30,18 @@ def test_what_is_staged_is_what_the_machine_lacks() -> None:
         assert name not in staged, name  # the machine's own, left out, or the tree's src/
 
 
+@pytest.mark.skipif(shutil.which("git") is None, reason="git")
+def test_a_folder_left_behind_is_not_counted_in_what_a_call_carries() -> None:
+    tool = _tool()
+    names = subprocess.run(
+        ["git", "ls-files", "-z", "docs"], cwd=ROOT, check=True, capture_output=True, text=True
+    ).stdout.split("\0")
+    docs = sum((ROOT / n).lstat().st_size for n in names if n and os.path.lexists(ROOT / n))
+    assert docs > 0
+    assert tool.tree_size(("docs",)) == tool.tree_size() - docs
+    assert tool.tree_size(("doc",)) == tool.tree_size()  # a folder, not a prefix of names
+
+
 @pytest.mark.skipif(shutil.which("xz") is None or shutil.which("git") is None, reason="xz, git")
 def test_parts_carried_one_call_at_a_time_unpack_into_the_same_site(tmp_path: Path) -> None:
     site = tmp_path / "site"

@@ -41,6 +41,9 @@ PLATFORMS += ["manylinux2014_x86_64", "manylinux1_x86_64"]
 # encoder (nothing renders)
 ROOTS = ("qdil[warp,sweep]", "sybil")
 LEFT_OUT = {"wandb", "optuna", "torch", "imageio-ffmpeg"}  # torch: the machine's CUDA build
+# folders of the unpacked wheels that nothing the check runs reads: Ray's Java workers (a
+# 33 MB jar that xz cannot shrink), Warp's own tests and examples, MuJoCo Studio's web build
+TRIM = ("ray/jars", "warp/tests", "warp/examples", "mujoco_studio_wasm")
 
 
 def on_device() -> set[str]:
@@ -77,12 +80,17 @@ def needed() -> dict[str, str]:
     return dict(sorted(found.items()))
 
 
-def tree_size() -> int:
-    """Bytes of the tracked tree, links counted as links (what a call carries)."""
+def tree_size(without: tuple[str, ...] = ()) -> int:
+    """Bytes of the tracked tree, links counted as links (what a call carries).
+
+    Args:
+        without: top folders of the tree the calls leave behind (see ``--without``).
+    """
     names = subprocess.run(
         ["git", "ls-files", "-z"], cwd=ROOT, check=True, capture_output=True, text=True
     ).stdout.split("\0")
-    return sum((ROOT / n).lstat().st_size for n in names if n and os.path.lexists(ROOT / n))
+    names = [n for n in names if n and not any(n.startswith(f"{w}/") for w in without)]
+    return sum((ROOT / n).lstat().st_size for n in names if os.path.lexists(ROOT / n))
 
 
 def pip(*args: str) -> None:
@@ -92,14 +100,17 @@ def pip(*args: str) -> None:
     subprocess.run([sys.executable, "-m", "pip", *args, "--no-deps", *target], check=True)
 
 
-def stage(out: Path) -> dict:
+def stage(out: Path, without: tuple[str, ...] = ()) -> dict:
     """Download, unpack, pack and split; returns the plan written to ``out/plan.json``."""
     versions = needed()
     wheels, site = out / "wheels", out / "site"
     shutil.rmtree(site, ignore_errors=True)
     pip("download", "-q", "-d", str(wheels), *[f"{n}=={v}" for n, v in versions.items()])
     pip("install", "-q", "--no-compile", "--target", str(site), *map(str, wheels.glob("*.whl")))
-    return pack(site, out, CALL - tree_size() - MARGIN, {"packages": versions})
+    for folder in TRIM:
+        shutil.rmtree(site / folder, ignore_errors=True)
+    room = CALL - tree_size(without) - MARGIN
+    return pack(site, out, room, {"packages": versions, "without": list(without)})
 
 
 def pack(site: Path, out: Path, room: int, plan: dict) -> dict:
@@ -141,12 +152,22 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--out", type=Path, default=ROOT / ".stage", help="(git ignores it)")
     parser.add_argument("--list", action="store_true", help="only list what would be staged")
+    parser.add_argument(
+        "--without",
+        nargs="*",
+        default=[],
+        metavar="FOLDER",
+        help="top folders of the tree the calls leave behind (docs: 22 MB of records), "
+        "each part then larger; before the calls, take them out of what travels: "
+        "git rm -r -q --cached FOLDER && echo /FOLDER/ >> .git/info/exclude "
+        "(after: git reset -q, and drop that line)",
+    )
     args = parser.parse_args(argv)
     if args.list:
         for name, version in needed().items():
             print(f"{name}=={version}")
         return 0
-    plan = stage(args.out)
+    plan = stage(args.out, tuple(w.strip("/") for w in args.without))
     mib = 2**20
     print(
         f"{len(plan['packages'])} distributions, packed {plan['packed_bytes'] / mib:.1f} MiB; "
