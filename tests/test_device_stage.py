@@ -110,3 +110,9 @@ def test_the_check_call_receives_resumes_the_carried_record_then_runs_the_check(
     assert kept.read_text() == '{"machine": {}}'  # carried, for the check to resume
     # then the check itself ran (here, without CUDA, it stops at once, saying so)
     assert done.returncode == 2 and "--device cuda: torch finds no CUDA device" in done.stderr
+    # options after the budget go to the check as they are
+    done = subprocess.run(
+        ["bash", "tools/device_check.sh", "60", "--no-such-option"], cwd=call, env=machine,
+        capture_output=True, text=True,
+    )  # fmt: skip
+    assert done.returncode == 2 and "unrecognized arguments: --no-such-option" in done.stderr
