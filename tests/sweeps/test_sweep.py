@@ -162,6 +162,29 @@ def test_a_killed_sweep_run_again_ends_as_its_plain_fits(one_ray, plain, tmp_pat
     before = {p: p.stat().st_mtime_ns for p in root.glob("walker_*/**/*")}
     qdil_here(command, tmp_path, WANDB_MODE="disabled")  # as user_env gives a process
     assert before == {p: p.stat().st_mtime_ns for p in root.glob("walker_*/**/*")}
+    for seed in SEEDS:  # and started no trial process: each log says why
+        log = (root / ".locks" / f"walker_true-seed{seed}.log").read_text().splitlines()
+        assert log[-1].endswith("finished and re-scored already; nothing to run"), log[-3:]
+
+
+def test_a_trial_is_done_when_its_resume_would_find_it_finished_and_rescored(
+    plain, tmp_path
+) -> None:
+    from qdil.sweeps.trainable import finished_and_rescored
+    from qdil.sweeps.trials import Trial
+
+    run = Path(shutil.copytree(plain / "walker_true-seed0", tmp_path / "walker_true-seed0"))
+    trial = Trial(SMOKE, 0, (), run.name, tmp_path)
+    assert finished_and_rescored(trial, 0)  # 3 of 3 iterations, nothing to re-score
+    assert not finished_and_rescored(trial, 1)  # no eval.json yet
+    longer = Trial(SMOKE, 0, (("qd.iterations", "5"),), run.name, tmp_path)
+    assert not finished_and_rescored(longer, 0)  # the override continues it
+    budget = Trial(SMOKE, 0, (("qd.iterations", "5"), ("qd.env_steps", "1")), run.name, tmp_path)
+    assert finished_and_rescored(budget, 0)  # longer, but its step budget is spent
+    main(["eval", str(run), "--episodes", "1", "--num-threads", "1"])
+    assert finished_and_rescored(trial, 1) and not finished_and_rescored(trial, 2)
+    (run / "checkpoints" / "last.pt").write_bytes(b"torn")
+    assert not finished_and_rescored(trial, 0)  # the child reads it and says what is wrong
 
 
 def test_sweep_help_lists_its_options() -> None:

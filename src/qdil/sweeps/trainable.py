@@ -23,6 +23,7 @@ import time
 from collections.abc import Callable, Iterator
 from functools import partial
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 from qdil.files import CONFIG_NAME
@@ -165,16 +166,46 @@ def _number(value: str | None) -> float:
         return float("nan")
 
 
-def rescored(run_dir: Path, episodes: int) -> bool:
-    """Whether the run's ``eval.json`` scores its last checkpoint with ``episodes`` episodes."""
+def rescored(run_dir: Path, episodes: int, iteration: int | None = None) -> bool:
+    """Whether the run's ``eval.json`` scores its last checkpoint with ``episodes`` episodes.
+
+    ``iteration``: the checkpoint's, where the caller has read it already.
+    """
     from qdil.qd.checkpoint import CHECKPOINT, read_checkpoint
 
     try:
         summary = json.loads((run_dir / "eval.json").read_text())
-        iteration = read_checkpoint(run_dir / CHECKPOINT)["iteration"]
+        if iteration is None:
+            iteration = read_checkpoint(run_dir / CHECKPOINT)["iteration"]
     except (OSError, ValueError, KeyError, RuntimeError):
         return False
     return summary.get("iteration") == iteration and summary.get("episodes_per_elite") == episodes
+
+
+def finished_and_rescored(trial: Trial, episodes: int) -> bool:
+    """Whether the trial's run is done: finished, and re-scored where ``episodes`` asks.
+
+    Finished as its ``qdil fit --resume`` would find it: the checkpoint against the stored
+    recipe's ``qd.iterations`` and ``qd.env_steps``, or the trial's overrides of them (the
+    planning already refused a folder of another configuration). Such a trial's child would
+    only read the run and say so: a finished sweep run again starts no process.
+    """
+    import yaml
+
+    from qdil.config import finished
+    from qdil.qd.checkpoint import CHECKPOINT, read_checkpoint
+
+    try:
+        qd = dict(yaml.safe_load((trial.run_dir / CONFIG_NAME).read_text())["qd"])
+        state = read_checkpoint(trial.run_dir / CHECKPOINT)
+        for key, value in trial.overrides:
+            if key in ("qd.iterations", "qd.env_steps"):
+                qd[key.removeprefix("qd.")] = yaml.safe_load(value)
+        limits = SimpleNamespace(iterations=int(qd["iterations"]), env_steps=qd.get("env_steps"))
+        done = finished(limits, state["iteration"], state["env_steps"])
+    except (OSError, ValueError, KeyError, TypeError, RuntimeError, yaml.YAMLError):
+        return False  # the child reads it and says what is wrong
+    return done and (episodes == 0 or rescored(trial.run_dir, episodes, state["iteration"]))
 
 
 def run_trial(
@@ -206,10 +237,16 @@ def run_trial(
         # rows a resumed run keeps are not reported again, but the last one is (the table)
         resumed = (trial.run_dir / CONFIG_NAME).is_file()
         rows = MetricsFollower(metrics, max(0, last_iteration(metrics) - 1) if resumed else 0)
-        work = partial(run_commands, fit, episodes, trial.run_dir, lock, threads, log, trial.cwd)
-        with _in_background(work) as finished:
-            while not finished(every):  # a finished command ends the wait at once
-                follow(rows, report, metric)
+        if resumed and finished_and_rescored(trial, episodes):
+            with open(log, "a") as out:
+                out.write(f"# {now()}: finished and re-scored already; nothing to run\n")
+        else:
+            work = partial(
+                run_commands, fit, episodes, trial.run_dir, lock, threads, log, trial.cwd
+            )
+            with _in_background(work) as finished:
+                while not finished(every):  # a finished command ends the wait at once
+                    follow(rows, report, metric)
         follow(rows, report, metric)
     report({"done": 1.0, **(_rescored(trial.run_dir, metric) if metric else {})})
 
