@@ -7,6 +7,7 @@ when a recipe is read.
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -40,15 +41,33 @@ class LoadedRecipe:
     stem: str
 
 
+_parsers = threading.local()
+
+
 def recipe_parser(
     parser_class: type[ArgumentParser] | None = None, **kwargs: Any
 ) -> ArgumentParser:
     """The jsonargparse parser of a recipe: ``--config`` plus every section's keys.
 
+    The plain parser (no arguments) is built once per thread and shared: building it reads
+    every section's signature (about 0.1 s), and reading, dumping or building a recipe
+    leaves it as it was. Classes named by ``class_path`` are looked up when a recipe is
+    read, so rewards registered later are found.
+
     Args:
         parser_class: the parser class (``qdil fit`` passes one with plain help texts).
         **kwargs: the parser's own options (``prog``, ``usage``, ...).
     """
+    if parser_class is None and not kwargs:
+        if getattr(_parsers, "plain", None) is None:
+            _parsers.plain = _new_parser(None, {})
+        return _parsers.plain
+    return _new_parser(parser_class, kwargs)
+
+
+def _new_parser(
+    parser_class: type[ArgumentParser] | None, kwargs: dict[str, Any]
+) -> ArgumentParser:
     from jsonargparse import ActionConfigFile, ArgumentParser
 
     from qdil.recipe import recipe
