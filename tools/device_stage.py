@@ -109,8 +109,9 @@ def stage(out: Path, without: tuple[str, ...] = ()) -> dict:
     pip("install", "-q", "--no-compile", "--target", str(site), *map(str, wheels.glob("*.whl")))
     for folder in TRIM:
         shutil.rmtree(site / folder, ignore_errors=True)
-    room = CALL - tree_size(without) - MARGIN
-    return pack(site, out, room, {"packages": versions, "without": list(without)})
+    tree = tree_size(without)
+    plan = {"packages": versions, "without": list(without), "tree_bytes": tree}
+    return pack(site, out, CALL - tree - MARGIN, plan)
 
 
 def pack(site: Path, out: Path, room: int, plan: dict) -> dict:
@@ -133,7 +134,6 @@ def pack(site: Path, out: Path, room: int, plan: dict) -> dict:
     packed.unlink()
     parts = [data[i : i + room] for i in range(0, len(data), room)]
     plan = plan | {
-        "tree_bytes": tree_size(),
         "packed_bytes": len(data),
         "sha256": hashlib.sha256(data).hexdigest(),
         "parts": len(parts),
