@@ -151,6 +151,7 @@ FLOORS = (
         "qdil.numerics",
         "qdil.provenance",
         "qdil.reductions",
+        "qdil.threads",
         "qdil.timing",
         "qdil.upgrades",
     ),

@@ -9,10 +9,12 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING, Any
 
-from qdil import numerics
+from qdil import numerics, threads
 
 # before anything computes: same seed, same bits (docs/concepts/reproducibility.md)
 numerics.configure()
+# before an OpenMP pool starts: idle threads sleep rather than spin (docs/concepts/environments.md)
+threads.configure()
 
 from qdil.envs import register_envs  # noqa: E402
 
